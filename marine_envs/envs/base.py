@@ -1,0 +1,205 @@
+"""Gymnasium front ends of the batched :class:`~marine_envs.envs.core.Simulator`.
+
+:class:`MarineEnv` is a single environment (a batch of one); :class:`MarineVectorEnv` is its native
+vector twin (a batch of N, no Python loop over boats while stepping). Both follow ARCHITECTURE.md
+contract 2: observations are sensor outputs, ``info["state"]`` is the true state,
+``info["action_applied"]`` the physical input, and the reward is minus the task's quadratic cost.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+from numpy.typing import NDArray
+
+from .core import Simulator
+
+_ONE = np.array([0])
+
+
+def _spaces(sim: Simulator, wrapped: tuple[str, ...]) -> tuple[spaces.Box, spaces.Box]:
+    n_u = len(sim.model.input_names)
+    action = spaces.Box(-1.0, 1.0, (n_u,), dtype=np.float32)
+    high = np.array([np.pi if c in wrapped else np.inf for c in sim.sensors.channels],
+                    dtype=np.float32)
+    return action, spaces.Box(-high, high, dtype=np.float32)
+
+
+class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
+    """A marine vehicle in waves, seen through its sensors; one boat.
+
+    Subclasses build the :class:`Simulator` and call ``super().__init__``.
+    Actions are normalised to [-1, 1] per input and mapped linearly to the physical limits;
+    larger actions are clipped (``info["action_clipped"]``), NaN or inf raises ``ValueError``.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, sim: Simulator, wrapped: tuple[str, ...] = (),
+                 render_mode: str | None = None, wave_seed: int | None = None) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode={render_mode!r} is invalid: None or 'rgb_array'")
+        self.sim, self.render_mode, self.wave_seed = sim, render_mode, wave_seed
+        self.metadata = {**self.metadata, "render_fps": round(1 / sim.dt)}
+        self.action_space, self.observation_space = _spaces(sim, wrapped)
+        self.dt = sim.dt
+        sim.bind(1)
+        self._renderer = None
+
+    @property
+    def model(self):
+        """The vehicle model (physics only)."""
+        return self.sim.model
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode. ``options={"state": x0}`` sets the initial true state (state units)."""
+        super().reset(seed=seed)
+        x0 = _initial_state(self.sim, options, batch=1)
+        wave_rngs = None if self.wave_seed is None else [np.random.default_rng(self.wave_seed)]
+        self.sim.reset(_ONE, [self.np_random], x0=x0, wave_rngs=wave_rngs)
+        obs = self.sim.measure()[0].astype(np.float32)
+        return obs, self._info()
+
+    def step(self, action):
+        sim = self.sim
+        sim.apply(action)
+        reward, failed = sim.advance()
+        obs = sim.measure()[0].astype(np.float32)
+        return obs, float(reward[0]), bool(failed[0]), False, self._info()
+
+    def _info(self) -> dict[str, Any]:
+        sim = self.sim
+        return {"state": sim.x[0].copy(), "action_applied": sim.u[0].copy(),
+                "action_clipped": bool(sim.clipped[0]), "disturbance": sim.d[0].copy(),
+                "measurement_mask": sim.sensors.valid[0].copy(), "time": sim.steps[0] * sim.dt}
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            self._renderer = self._make_renderer()
+        return self._renderer.draw(self.sim.x[0], self.sim.u[0], self.sim.steps[0] * self.dt)
+
+    def _make_renderer(self):  # pragma: no cover - per vehicle
+        raise NotImplementedError(f"{type(self).__name__} has no renderer")
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+class MarineVectorEnv(VectorEnv):
+    """N boats stepped together with array operations; equals N :class:`MarineEnv` given the same
+    seeds (``reset(seed=s)`` seeds boat i with ``s + i``, as Gymnasium's SyncVectorEnv does).
+
+    Episodes end by failure (``terminated``) or after ``max_episode_steps`` (``truncated``); a
+    finished boat is reset on the next step (``AutoresetMode.NEXT_STEP``), its action ignored.
+    """
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10,
+                                          "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, sim: Simulator, num_envs: int, max_episode_steps: int | None,
+                 wrapped: tuple[str, ...] = (), render_mode: str | None = None,
+                 wave_seed: int | None = None) -> None:
+        if not (isinstance(num_envs, int | np.integer) and num_envs >= 1):
+            raise ValueError(f"num_envs={num_envs!r} is invalid: an integer >= 1")
+        if max_episode_steps is not None and max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps={max_episode_steps!r} is invalid: >= 1 or None")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode={render_mode!r} is invalid: None or 'rgb_array'")
+        self.sim, self.num_envs, self.max_episode_steps = sim, int(num_envs), max_episode_steps
+        self.render_mode, self.wave_seed, self.dt = render_mode, wave_seed, sim.dt
+        self.single_action_space, self.single_observation_space = _spaces(sim, wrapped)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        sim.bind(self.num_envs)
+        self._rngs: list[np.random.Generator] = []
+        self._done = np.zeros(self.num_envs, dtype=bool)
+        self._all = np.arange(self.num_envs)
+        self._mask = np.ones(self.num_envs, dtype=bool)
+        self._mask.flags.writeable = False
+        self._renderer = None
+
+    def reset(self, *, seed: int | list[int | None] | None = None,
+              options: dict[str, Any] | None = None):
+        """Reset every boat. ``seed``: an int (boat i gets ``seed + i``), a list, or None."""
+        if seed is None and not self._rngs:
+            seed = [None] * self.num_envs
+        if seed is not None:
+            seeds = [seed + i for i in range(self.num_envs)] if isinstance(seed, int) else seed
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"seed: {len(seeds)} seeds for {self.num_envs} environments")
+            self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        x0 = _initial_state(self.sim, options, batch=self.num_envs)
+        self.sim.reset(self._all, self._rngs, x0=x0, wave_rngs=self._wave_rngs(self._all))
+        self._done[:] = False
+        return self.sim.measure().astype(np.float32), self._info()
+
+    def step(self, actions):
+        sim = self.sim
+        sim.apply(actions)
+        reward, terminated = sim.advance()
+        truncated = (sim.steps >= self.max_episode_steps) if self.max_episode_steps \
+            else np.zeros(self.num_envs, dtype=bool)
+        if self._done.any():
+            idx = np.flatnonzero(self._done)
+            sim.reset(idx, [self._rngs[i] for i in idx], wave_rngs=self._wave_rngs(idx))
+            reward[idx], terminated[idx], truncated[idx] = 0.0, False, False
+        self._done = terminated | truncated
+        obs = sim.measure().astype(np.float32)
+        return obs, reward, terminated, truncated, self._info()
+
+    def _wave_rngs(self, idx):
+        if self.wave_seed is None:
+            return None
+        return [np.random.default_rng(self.wave_seed) for _ in idx]
+
+    def _info(self) -> dict[str, Any]:
+        sim, m = self.sim, self._mask
+        return {"state": sim.x.copy(), "_state": m, "action_applied": sim.u.copy(),
+                "_action_applied": m, "action_clipped": sim.clipped.copy(), "_action_clipped": m,
+                "disturbance": sim.d.copy(), "_disturbance": m,
+                "measurement_mask": sim.sensors.valid.copy(), "_measurement_mask": m,
+                "time": sim.steps * sim.dt, "_time": m}
+
+    def render(self):
+        """Frames of every boat (a tuple of RGB arrays) in ``rgb_array`` mode."""
+        if self.render_mode != "rgb_array":
+            return None
+        if self._renderer is None:
+            self._renderer = self._make_renderer()
+        return tuple(self._renderer.draw(x, u, t * self.dt)
+                     for x, u, t in zip(self.sim.x, self.sim.u, self.sim.steps, strict=True))
+
+    def _make_renderer(self):  # pragma: no cover - per vehicle
+        raise NotImplementedError(f"{type(self).__name__} has no renderer")
+
+    def close_extras(self, **kwargs: Any) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def _initial_state(sim: Simulator, options: dict[str, Any] | None, batch: int):
+    """The ``state`` reset option, validated; None when the initial state is to be drawn."""
+    if not options:
+        return None
+    unknown = sorted(set(options) - {"state"})
+    if unknown:
+        raise ValueError(f"unknown reset option(s) {unknown}; known: state")
+    if options.get("state") is None:
+        return None
+    x0 = np.asarray(options["state"], dtype=float)
+    n_x = len(sim.model.state_names)
+    if x0.shape != (n_x,) or not np.isfinite(x0).all():
+        raise ValueError(f"options['state'] must be {n_x} finite values "
+                         f"({', '.join(sim.model.state_names)}), got {x0.tolist()!r}")
+    return x0

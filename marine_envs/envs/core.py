@@ -1,0 +1,201 @@
+"""The batched simulation core behind every environment: model + sea + sensors + task.
+
+One :class:`Simulator` steps a batch of independent boats with array operations. The single
+environment is a batch of one, the native vector environment a batch of N, so both run the same
+code and a vector environment equals N single ones given the same seeds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Literal
+
+import numpy as np
+import scipy.linalg
+from numpy.typing import ArrayLike, NDArray
+
+from ..models import VehicleModel
+from ..sea import WaveRealisation
+from ..sensors import SensorSuite, per_channel
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclasses.dataclass
+class Task:
+    """A regulation task: drive the state to ``x_ref`` with little input.
+
+    Stage cost of step k: ``(x_k - x_ref)' diag(q) (x_k - x_ref) + (u_k - u_ref)' diag(r)
+    (u_k - u_ref)``, exactly the discrete LQR cost, so an episode's return is minus the LQR cost
+    of its trajectory; the reward is ``-reward_scale * cost``. Angles enter the cost as the
+    model's (unwrapped) linear states, as they do in LQR. An episode terminates when a state
+    leaves ``limits`` (absolute value, state units).
+    """
+
+    q: FloatArray
+    r: FloatArray
+    x_ref: FloatArray
+    u_ref: FloatArray
+    limits: FloatArray  #: per state; inf where unconstrained
+    reward_scale: float = 1.0
+
+
+def make_task(model: VehicleModel, weights: Mapping[str, float], input_weights: Mapping[str, float],
+              *, reference: Mapping[str, float] | None = None,
+              limits: Mapping[str, float] | None = None, reward_scale: float = 1.0) -> Task:
+    """A :class:`Task` from weights, reference and limits given by state and input name."""
+    names = model.state_names
+    q = per_channel("state_weights", weights, names)
+    r = per_channel("input_weights", input_weights, model.input_names)
+    if not (np.all(q >= 0) and np.all(r >= 0) and np.isfinite(q).all() and np.isfinite(r).all()):
+        raise ValueError(f"state_weights={q.tolist()} / input_weights={r.tolist()} must be >= 0")
+    lim = per_channel("limits", limits, names, default=math.inf)
+    if not np.all(lim > 0):
+        raise ValueError(f"limits={lim.tolist()} is invalid: must be > 0")
+    return Task(q=q, r=r, x_ref=model.x0 + per_channel("reference", reference, names),
+                u_ref=model.u0, limits=lim, reward_scale=reward_scale)
+
+
+class ExactLinear:
+    """Exact discretisation of a linear model with inputs and disturbances held over a step:
+    ``x_next = [x u d] @ transition + offset``."""
+
+    def __init__(self, model: VehicleModel, dt: float) -> None:
+        A, B, E = model.linearize()
+        n, m = A.shape[0], B.shape[1] + E.shape[1]
+        block = np.zeros((n + m, n + m))
+        block[:n, :n], block[:n, n:] = A, np.hstack([B, E])
+        self.transition = scipy.linalg.expm(block * dt)[:n].T.copy()
+        nominal = np.concatenate([model.x0, model.u0, np.zeros(E.shape[1])])
+        offset = model.x0 - nominal @ self.transition
+        self.offset = offset if np.any(offset) else None
+
+    def __call__(self, xud: FloatArray) -> FloatArray:
+        x_next = xud @ self.transition
+        return x_next if self.offset is None else x_next + self.offset
+
+
+class RK4:
+    """Classical Runge-Kutta on the model's ``rhs`` with ``substeps`` per control period."""
+
+    def __init__(self, model: VehicleModel, dt: float, substeps: int = 4) -> None:
+        self.rhs, self.h, self.substeps = model.rhs, dt / substeps, substeps
+        self.n_x, self.n_u = len(model.state_names), len(model.input_names)
+
+    def __call__(self, xud: FloatArray) -> FloatArray:
+        f, h = self.rhs, self.h
+        x, u, d = np.split(xud, [self.n_x, self.n_x + self.n_u], axis=1)
+        for _ in range(self.substeps):
+            k1 = f(x, u, d)
+            k2 = f(x + 0.5 * h * k1, u, d)
+            k3 = f(x + 0.5 * h * k2, u, d)
+            k4 = f(x + h * k3, u, d)
+            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if not np.isfinite(x).all():
+            bad = int(np.flatnonzero(~np.isfinite(x).all(axis=1))[0])
+            raise FloatingPointError(f"simulation diverged: non-finite state {x[bad]} of boat "
+                                     f"{bad} (a parameter or time step out of range?)")
+        return x
+
+
+InitialState = Callable[[np.random.Generator], FloatArray]
+
+
+class Simulator:
+    """Steps a batch of boats: waves -> dynamics -> cost -> sensors.
+
+    :param model: the vehicle model.
+    :param sensors: the sensor chain over some of the model's states (by name).
+    :param task: cost and termination.
+    :param waves: the wave realisation (its channels are the model's disturbances), or None.
+    :param dt: control period, s.
+    :param initial_state: draws one boat's initial state from its generator.
+    :param integrator: ``"exact"`` (linear models only) or ``"rk4"``.
+    """
+
+    def __init__(self, model: VehicleModel, sensors: SensorSuite, task: Task,
+                 waves: WaveRealisation | None, dt: float, initial_state: InitialState,
+                 integrator: Literal["exact", "rk4"] = "exact", substeps: int = 4) -> None:
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt={dt!r} is invalid: the control period must be > 0 s")
+        if integrator == "exact" and not model.is_linear:
+            raise ValueError(f"integrator='exact' needs a linear model; {model.name!r} is not")
+        if integrator not in ("exact", "rk4"):
+            raise ValueError(f"integrator={integrator!r} is invalid: 'exact' or 'rk4'")
+        self.model, self.sensors, self.task, self.waves = model, sensors, task, waves
+        self.dt, self.initial_state = dt, initial_state
+        self.integrate = ExactLinear(model, dt) if integrator == "exact" else RK4(model, dt,
+                                                                                 substeps)
+        self.measured = np.array([model.state_names.index(c) for c in sensors.channels])
+        self.u_low, self.u_high = model.u_bounds
+        self.u_scale = (self.u_high - self.u_low) / 2
+        self.u_mid = (self.u_high + self.u_low) / 2
+        n_d = len(model.disturbance_names)
+        # the reward is a weighted sum of squares of the stacked [x u d] vector
+        self._weights = -task.reward_scale * np.concatenate([task.q, task.r, np.zeros(n_d)])
+        reference = np.concatenate([task.x_ref, task.u_ref, np.zeros(n_d)])
+        self._reference = reference if np.any(reference) else None
+
+    def bind(self, batch_size: int) -> None:
+        """Allocate state for ``batch_size`` boats."""
+        self.batch_size = batch_size
+        self.x = np.tile(self.model.x0, (batch_size, 1))
+        self.u = np.tile(self.model.u0, (batch_size, 1))
+        self.d = np.zeros((batch_size, len(self.model.disturbance_names)))
+        self.clipped = self._never_clipped = np.zeros(batch_size, dtype=bool)
+        self.steps = np.zeros(batch_size, dtype=np.int64)
+        self.sensors.bind(batch_size)
+        if self.waves is not None:
+            self.waves.bind(batch_size)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator],
+              x0: ArrayLike | None = None, wave_rngs: Sequence[np.random.Generator] | None = None
+              ) -> None:
+        """New episodes for boats ``idx``: initial state, wave phases, sensor state."""
+        for i, rng in zip(idx, rngs, strict=True):
+            self.x[i] = self.initial_state(rng) if x0 is None else x0
+        self.u[idx], self.d[idx], self.clipped[idx], self.steps[idx] = self.model.u0, 0, False, 0
+        if self.waves is not None:
+            self.waves.reset(idx, rngs if wave_rngs is None else wave_rngs)
+        self.sensors.reset(idx, rngs)
+
+    def apply(self, action: ArrayLike) -> None:
+        """Map normalised actions (batch x inputs) in [-1, 1] to physical inputs.
+
+        Larger actions are clipped and noted in :attr:`clipped`.
+        :raises ValueError: NaN or inf in the action, or a wrong shape.
+        """
+        a = np.asarray(action, dtype=np.float64)
+        if a.size != self.u.size:
+            raise ValueError(f"action has shape {a.shape}; expected {self.u.shape[1]} value(s) "
+                             f"per environment for {self.batch_size} environment(s)")
+        a = a.reshape(self.u.shape)
+        peak = float(np.abs(a).max())
+        if not math.isfinite(peak):
+            raise ValueError(f"action contains NaN or inf: {a.tolist()!r}")
+        if peak > 1.0:
+            self.clipped = (np.abs(a) > 1.0).any(axis=1)
+            a = np.clip(a, -1.0, 1.0)
+        else:
+            self.clipped = self._never_clipped
+        self.u = self.u_mid + self.u_scale * a
+
+    def advance(self) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """One control period for every boat: returns ``(reward, failed)``.
+
+        :raises FloatingPointError: a nonlinear model's state became NaN or inf.
+        """
+        if self.waves is not None:
+            self.d = self.waves.step()
+        xud = np.concatenate([self.x, self.u, self.d], axis=1)
+        error = xud if self._reference is None else xud - self._reference
+        reward = (error * error) @ self._weights
+        self.x = self.integrate(xud)
+        self.steps += 1
+        return reward, (np.abs(self.x) > self.task.limits).any(axis=1)
+
+    def measure(self) -> FloatArray:
+        """Sensor outputs (batch x channels) of the current states."""
+        return self.sensors.measure(self.x[:, self.measured])

@@ -1,0 +1,158 @@
+"""USV-v0: rudder-roll-yaw course keeping with roll damping in waves (seed 000)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any, Literal
+
+import numpy as np
+
+from ..models import USVModel
+from ..sea import MeasuredSpectrum, SeaState, WaveRealisation, wave_coupling
+from ..sensors import SensorSuite, per_channel
+from .base import MarineEnv, MarineVectorEnv
+from .core import Simulator, make_task
+
+DEG = math.pi / 180
+#: Sensor defaults per measured channel (SI): noise standard deviation and quantization step.
+DEFAULT_NOISE = {"r": 0.1 * DEG, "psi": 0.2 * DEG, "p": 0.1 * DEG, "phi": 0.1 * DEG}
+DEFAULT_QUANTIZATION = {"r": 0.05 * DEG, "psi": 0.1 * DEG, "p": 0.05 * DEG, "phi": 0.1 * DEG}
+#: Bryson's rule: weight = 1 / (acceptable size)^2 -> heading 3 deg, roll 2 deg, rudder 10 deg.
+DEFAULT_STATE_WEIGHTS = {"psi": 1 / (3 * DEG) ** 2, "phi": 1 / (2 * DEG) ** 2}
+DEFAULT_INPUT_WEIGHTS = {"delta": 1 / (10 * DEG) ** 2}
+
+
+def make_usv_simulator(
+    *,
+    dt: float = 0.1,
+    params: Mapping[str, float] | None = None,
+    hs: float | Sequence[Sequence[float]] | None = 2.0,
+    tp: float | None = 8.0,
+    spectrum: Literal["pm", "jonswap"] | MeasuredSpectrum = "pm",
+    gamma: float = 3.3,
+    wave_heading: float = 60 * DEG,
+    speed: float = 7.7,
+    n_wave_components: int = 64,
+    waves: bool = True,
+    coupling: Mapping[str, float] | None = None,
+    noise_std: float | Mapping[str, float] | None = None,
+    quantization: float | Mapping[str, float] | None = None,
+    quantizer: Literal["static", "zooming"] = "static",
+    zoom_k: float = 0.6,
+    bias: float | Mapping[str, float] | None = None,
+    delay: int | Mapping[str, int] | None = None,
+    dropout: float | Mapping[str, float] | None = None,
+    initial_spread: Mapping[str, float] | None = None,
+    state_weights: Mapping[str, float] | None = None,
+    input_weights: Mapping[str, float] | None = None,
+    max_roll: float = 40 * DEG,
+) -> Simulator:
+    """The USV simulator; the keyword arguments are those of :class:`USVEnv` (see there)."""
+    model = USVModel().with_params(**(params or {}))
+    channels = USVModel.measured_names
+    sensors = SensorSuite.standard(
+        channels, noise_std=DEFAULT_NOISE if noise_std is None else noise_std,
+        quantization=DEFAULT_QUANTIZATION if quantization is None else quantization,
+        quantizer=quantizer, zoom_k=zoom_k, bias=bias, delay=delay, dropout=dropout,
+        wrap=("psi",))
+    if not (math.isfinite(max_roll) and max_roll > 0):
+        raise ValueError(f"max_roll={max_roll!r} is invalid: must be > 0 rad")
+    task = make_task(model, DEFAULT_STATE_WEIGHTS if state_weights is None else state_weights,
+                     DEFAULT_INPUT_WEIGHTS if input_weights is None else input_weights,
+                     limits={"phi": max_roll})
+    sea = SeaState(hs=hs, tp=tp, spectrum=spectrum, gamma=gamma)
+    realisation = WaveRealisation(
+        sea, wave_coupling(model, wave_heading, **(coupling or {})), dt=dt, speed=speed,
+        heading=wave_heading, n_components=n_wave_components) if waves else None
+    spread = per_channel("initial_spread",
+                         {"psi": 10 * DEG, "phi": 3 * DEG} if initial_spread is None
+                         else initial_spread, model.state_names)
+
+    def initial_state(rng: np.random.Generator) -> np.ndarray:
+        return model.x0 + spread * rng.uniform(-1.0, 1.0, spread.size)
+
+    return Simulator(model, sensors, task, realisation, dt, initial_state)
+
+
+class USVEnv(MarineEnv):
+    """Rudder-roll-yaw course keeping with roll damping, in waves.
+
+    ## Description
+    An unmanned surface vessel (seed 000; the Van Amerongen rudder-roll model of MODELS.md 1)
+    holds its course in a random sea using its rudder only, while damping the roll the waves
+    excite. The rudder turns the ship and, through the sway it induces, rolls it: the classic
+    rudder-roll-stabilisation trade-off. The sway speed is not measured.
+
+    ## Action Space
+    ``Box(-1, 1, (1,), float32)``: rudder angle normalised by the rudder limit (35 deg).
+    Out-of-range actions are clipped and flagged in ``info["action_clipped"]``; NaN/inf raise.
+
+    ## Observation Space
+    ``Box((4,), float32)``: the seed's measured channels ``[r, psi, p, phi]`` (rad/s, rad,
+    rad/s, rad) after bias, Gaussian noise, heading wrapping to (-pi, pi], quantization, delay and
+    dropout, as configured. Default noise std 0.1 deg/s, 0.2 deg, 0.1 deg/s, 0.1 deg; default
+    quantization steps 0.05 deg/s, 0.1 deg, 0.05 deg/s, 0.1 deg.
+
+    ## Rewards
+    Minus the discrete-LQR stage cost ``x_k'Q x_k + u_k'R u_k`` of the state and rudder at the
+    start of the step, with Bryson weights (heading 3 deg, roll 2 deg, rudder 10 deg give one unit
+    each), so an episode's return is minus its LQR cost. The heading in the cost is the true,
+    unwrapped heading: a full turn is not free.
+
+    ## Starting State
+    Heading uniform in +-10 deg and roll in +-3 deg (``initial_spread``), other states zero; or
+    ``reset(options={"state": x0})``. Each episode draws new wave phases from the episode seed.
+
+    ## Episode End
+    Terminated when |roll| exceeds ``max_roll`` (40 deg); truncated after 1000 steps (100 s).
+
+    ## Info
+    ``state`` (true [v, r, psi, p, phi]), ``action_applied`` (rudder, rad), ``action_clipped``,
+    ``disturbance`` ([w_psi, w_phi], rad/s^2), ``measurement_mask`` (False = dropped, value held),
+    ``time`` (s).
+
+    ## Arguments
+    * ``dt``: control period, s (0.1).
+    * ``params``: model parameter overrides by MODELS.md symbol, e.g. ``{"wn": 0.7}``.
+    * ``hs``: significant wave height, m (2.0), a list of ``(t, hs)`` points for a schedule, or
+      None with a measured spectrum; ``tp``: peak period, s (8.0; None = one-parameter PM);
+      ``spectrum``: "pm", "jonswap" or a ``MeasuredSpectrum``; ``gamma``: JONSWAP gamma.
+    * ``wave_heading``: encounter angle, rad (pi/3: stern-quartering, pi = head seas);
+      ``speed``: ship speed for the encounter frequency, m/s (7.7 = 15 kn);
+      ``n_wave_components`` (64); ``waves`` (True; False = calm water);
+      ``coupling``: options of :class:`~marine_envs.sea.USVWaveCoupling`.
+    * ``noise_std``, ``bias``, ``quantization``, ``delay`` (samples), ``dropout`` (probability):
+      a number for every channel or ``{channel: value}``, SI units; ``quantizer``: "static" or
+      "zooming" (seed 000's relative law, rate ``zoom_k``).
+    * ``initial_spread``: ``{state: half-width}`` of the uniform initial state.
+    * ``state_weights``, ``input_weights``: ``{name: weight}`` of the task cost.
+    * ``max_roll``: roll angle that ends the episode, rad.
+    * ``wave_seed``: if set, every episode sees the same wave realisation (noise still varies).
+    * ``render_mode``: None or "rgb_array" (heading, roll and rudder drawn; works with RecordVideo).
+    """
+
+    def __init__(self, render_mode: str | None = None, wave_seed: int | None = None,
+                 **kwargs: Any) -> None:
+        super().__init__(make_usv_simulator(**kwargs), wrapped=("psi",), render_mode=render_mode,
+                         wave_seed=wave_seed)
+
+    def _make_renderer(self):
+        from .rendering import USVRenderer
+
+        return USVRenderer(self.sim.model)
+
+
+class USVVectorEnv(MarineVectorEnv):
+    """``num_envs`` USVs stepped together with array operations; arguments as :class:`USVEnv`."""
+
+    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000,
+                 render_mode: str | None = None, wave_seed: int | None = None,
+                 **kwargs: Any) -> None:
+        super().__init__(make_usv_simulator(**kwargs), num_envs, max_episode_steps,
+                         wrapped=("psi",), render_mode=render_mode, wave_seed=wave_seed)
+
+    def _make_renderer(self):
+        from .rendering import USVRenderer
+
+        return USVRenderer(self.sim.model)

@@ -1,0 +1,124 @@
+"""The vehicle-model protocol shared by every vehicle (ARCHITECTURE.md, contract 1).
+
+A model is pure physics: continuous-time dynamics ``x_dot = rhs(x, u, d)`` in SI units and
+radians, vectorised over any leading batch axes, and its linearisation. It knows nothing about
+Gymnasium, randomness or sensors. Parameters live in a frozen dataclass so that variants are made
+with :func:`dataclasses.replace` (or :meth:`VehicleModel.with_params`) and validated on creation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def require(condition: bool, name: str, value: Any, expectation: str) -> None:
+    """Raise ``ValueError`` naming the offending parameter unless ``condition`` holds."""
+    if not condition:
+        raise ValueError(f"{name}={value!r} is invalid: {expectation}")
+
+
+class VehicleModel(ABC):
+    """Base class of all vehicle models.
+
+    Subclasses set the class attributes below and implement :meth:`rhs`. ``linearize`` defaults to
+    central finite differences of ``rhs``; linear models override it with the exact matrices.
+    """
+
+    name: ClassVar[str]
+    state_names: ClassVar[tuple[str, ...]]
+    input_names: ClassVar[tuple[str, ...]]
+    disturbance_names: ClassVar[tuple[str, ...]]
+    #: SI unit of each state, input and disturbance, in the order of the names.
+    state_units: ClassVar[tuple[str, ...]]
+    input_units: ClassVar[tuple[str, ...]]
+    disturbance_units: ClassVar[tuple[str, ...]]
+    #: True when ``rhs`` is affine in (x, u, d): the environment then steps it exactly (ZOH).
+    is_linear: ClassVar[bool] = False
+
+    def __init__(self, params: Any) -> None:
+        self.params = params
+
+    # -- nominal operating point -------------------------------------------------------------
+    @property
+    def x0(self) -> FloatArray:
+        """Nominal (equilibrium) state."""
+        return np.zeros(len(self.state_names))
+
+    @property
+    def u0(self) -> FloatArray:
+        """Nominal input that holds :attr:`x0` in equilibrium with zero disturbance."""
+        return np.zeros(len(self.input_names))
+
+    @property
+    @abstractmethod
+    def u_bounds(self) -> tuple[FloatArray, FloatArray]:
+        """Physical input limits ``(low, high)`` in the units of :attr:`input_units`."""
+
+    # -- dynamics ------------------------------------------------------------------------------
+    @abstractmethod
+    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
+        """Continuous-time state derivative.
+
+        :param x: state, shape ``(..., n_x)``, units :attr:`state_units`.
+        :param u: input, shape ``(..., n_u)``, units :attr:`input_units`.
+        :param d: disturbance, shape ``(..., n_d)``, units :attr:`disturbance_units`; ``None``
+            means zero.
+        :return: ``x_dot``, shape ``(..., n_x)``.
+        """
+
+    def linearize(
+        self, x0: ArrayLike | None = None, u0: ArrayLike | None = None, eps: float = 1e-6
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Jacobians ``(A, B, E)`` of :meth:`rhs` at ``(x0, u0, d=0)`` by central differences."""
+        x0 = self.x0 if x0 is None else np.asarray(x0, dtype=float)
+        u0 = self.u0 if u0 is None else np.asarray(u0, dtype=float)
+        d0 = np.zeros(len(self.disturbance_names))
+        return tuple(  # type: ignore[return-value]
+            _jacobian(lambda z, i=i: self.rhs(*_replace_arg((x0, u0, d0), i, z)), arg, eps)
+            for i, arg in enumerate((x0, u0, d0))
+        )
+
+    # -- variants ------------------------------------------------------------------------------
+    def with_params(self, **changes: float) -> VehicleModel:
+        """A copy of this model with some parameters replaced (validated, names as in MODELS.md)."""
+        unknown = set(changes) - {f.name for f in dataclasses.fields(self.params)}
+        if unknown:
+            known = ", ".join(f.name for f in dataclasses.fields(self.params))
+            raise ValueError(f"unknown parameter(s) {sorted(unknown)} for model {self.name!r}; "
+                             f"known: {known}")
+        return type(self)(dataclasses.replace(self.params, **changes))
+
+    def _split(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None):
+        """Arrays of states, inputs and disturbances broadcast to one batch shape."""
+        x = np.asarray(x, dtype=float)
+        u = np.asarray(u, dtype=float)
+        d = np.zeros(len(self.disturbance_names)) if d is None else np.asarray(d, dtype=float)
+        for arr, names, what in ((x, self.state_names, "x"), (u, self.input_names, "u"),
+                                 (d, self.disturbance_names, "d")):
+            if arr.shape[-1:] != (len(names),):
+                raise ValueError(f"{what} must have last axis {len(names)} ({', '.join(names)}), "
+                                 f"got shape {arr.shape}")
+        return x, u, d
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.params!r})"
+
+
+def _replace_arg(args: tuple, i: int, value: FloatArray) -> tuple:
+    return args[:i] + (value,) + args[i + 1 :]
+
+
+def _jacobian(f, z0: FloatArray, eps: float) -> FloatArray:
+    """Central-difference Jacobian of ``f`` at ``z0``, evaluated in one vectorised call."""
+    n = z0.size
+    steps = eps * np.maximum(1.0, np.abs(z0))
+    perturbed = np.concatenate([z0 + np.diag(steps), z0 - np.diag(steps)])
+    values = f(perturbed)
+    return ((values[:n] - values[n:]) / (2 * steps[:, None])).T

@@ -1,0 +1,116 @@
+"""USV: 5-state rudder-sway-yaw-roll model (seed 000; MODELS.md section 1).
+
+Van Amerongen / Van der Klugt rudder-roll structure with the seed's parameters::
+
+    v_dot   = (-v + Kdv*delta) / Tv
+    r_dot   = (Kvr*v - r + Kdr*delta) / Tr + w_psi
+    psi_dot = r
+    p_dot   = wn^2 * (Kvp*v + Kdp*delta) - 2*zeta*wn*p - wn^2*phi + w_phi
+    phi_dot = p
+
+``x = [v, r, psi, p, phi]`` (m/s, rad/s, rad, rad/s, rad), ``u = [delta]`` (rad),
+``d = [w_psi, w_phi]`` (rad/s^2): wave yaw and roll moments per unit inertia entering the r and p
+rows. That is reading (a) of MODELS.md 1.2, the only one for which the seed's observer is feasible;
+reading (b), disturbances entering the psi and phi rows, is kept as ``wave_input="angle"`` for
+model-mismatch studies.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import ClassVar, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from .base import FloatArray, VehicleModel, require
+
+
+@dataclasses.dataclass(frozen=True)
+class USVParams:
+    """Parameters of the USV model; names are MODELS.md's symbols. SI units, radians."""
+
+    Kvr: float = -0.46  #: sway-to-yaw-rate gain, rad/s per m/s  [SEED]
+    wn: float = 0.63  #: roll natural frequency, rad/s  [SEED]
+    zeta: float = 0.0936  #: roll damping ratio, -  [SEED]
+    Kdr: float = -0.0211  #: rudder-to-yaw-rate gain, rad/s per rad  [SEED]
+    Tr: float = 1.6667  #: yaw time constant, s  [SEED]
+    Tv: float = 10.0  #: sway time constant, s  [SEED]
+    Kdv: float = 0.0780  #: rudder-to-sway gain, m/s per rad  [SEED]
+    Kvp: float = 1.6380  #: sway-to-roll gain, rad per m/s  [SEED]
+    Kdp: float = -0.0852  #: rudder-to-roll gain, rad per rad  [SEED]
+    delta_max: float = math.radians(35.0)  #: rudder limit, rad  [PROPOSED: usual +-35 deg]
+    wave_input: Literal["moment", "angle"] = "moment"  #: where w_psi, w_phi enter (see module doc)
+
+    def __post_init__(self) -> None:
+        for name in ("wn", "Tr", "Tv", "delta_max"):
+            value = getattr(self, name)
+            require(math.isfinite(value) and value > 0, name, value, "must be finite and > 0")
+        require(math.isfinite(self.zeta) and self.zeta >= 0, "zeta", self.zeta,
+                "must be finite and >= 0")
+        for name in ("Kvr", "Kdr", "Kdv", "Kvp", "Kdp"):
+            value = getattr(self, name)
+            require(math.isfinite(value), name, value, "must be finite")
+        require(self.wave_input in ("moment", "angle"), "wave_input", self.wave_input,
+                "must be 'moment' or 'angle'")
+
+
+class USVModel(VehicleModel):
+    """Rudder-roll-yaw model of an unmanned surface vessel (seed 000)."""
+
+    name: ClassVar[str] = "usv"
+    state_names: ClassVar[tuple[str, ...]] = ("v", "r", "psi", "p", "phi")
+    input_names: ClassVar[tuple[str, ...]] = ("delta",)
+    disturbance_names: ClassVar[tuple[str, ...]] = ("w_psi", "w_phi")
+    state_units: ClassVar[tuple[str, ...]] = ("m/s", "rad/s", "rad", "rad/s", "rad")
+    input_units: ClassVar[tuple[str, ...]] = ("rad",)
+    disturbance_units: ClassVar[tuple[str, ...]] = ("rad/s^2", "rad/s^2")
+    #: The seed's measured channels: p = 4, sway speed v is not measured.
+    measured_names: ClassVar[tuple[str, ...]] = ("r", "psi", "p", "phi")
+    is_linear: ClassVar[bool] = True
+
+    def __init__(self, params: USVParams | None = None) -> None:
+        super().__init__(USVParams() if params is None else params)
+
+    @property
+    def u_bounds(self) -> tuple[FloatArray, FloatArray]:
+        return np.array([-self.params.delta_max]), np.array([self.params.delta_max])
+
+    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
+        x, u, d = self._split(x, u, d)
+        k = self.params
+        v, r, psi, p, phi = np.moveaxis(x, -1, 0)
+        delta = u[..., 0]
+        w_psi, w_phi = d[..., 0], d[..., 1]
+        moment = k.wave_input == "moment"
+        v_dot = (-v + k.Kdv * delta) / k.Tv
+        r_dot = (k.Kvr * v - r + k.Kdr * delta) / k.Tr + (w_psi if moment else 0.0)
+        psi_dot = r + (0.0 if moment else w_psi)
+        p_dot = k.wn**2 * (k.Kvp * v + k.Kdp * delta - phi) - 2 * k.zeta * k.wn * p \
+            + (w_phi if moment else 0.0)
+        phi_dot = p + (0.0 if moment else w_phi)
+        return np.stack(np.broadcast_arrays(v_dot, r_dot, psi_dot, p_dot, phi_dot), axis=-1)
+
+    def linearize(self, x0: ArrayLike | None = None, u0: ArrayLike | None = None,
+                  eps: float = 0.0) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Exact ``(A, B, E)``: the model is linear, so they do not depend on the point."""
+        k = self.params
+        wn2 = k.wn**2
+        A = np.array([
+            [-1 / k.Tv, 0, 0, 0, 0],
+            [k.Kvr / k.Tr, -1 / k.Tr, 0, 0, 0],
+            [0, 1, 0, 0, 0],
+            [k.Kvp * wn2, 0, 0, -2 * k.zeta * k.wn, -wn2],
+            [0, 0, 0, 1, 0],
+        ], dtype=float)
+        B = np.array([[k.Kdv / k.Tv], [k.Kdr / k.Tr], [0], [k.Kdp * wn2], [0]], dtype=float)
+        rows = (1, 3) if k.wave_input == "moment" else (2, 4)
+        E = np.zeros((5, 2))
+        E[rows[0], 0] = E[rows[1], 1] = 1.0
+        return A, B, E
+
+    @property
+    def C(self) -> FloatArray:
+        """Output matrix of the seed's measured channels ``[r, psi, p, phi]`` (= [0 I4])."""
+        return np.eye(5)[[self.state_names.index(n) for n in self.measured_names]]

@@ -1,0 +1,502 @@
+"""Recordings: logged runs of a vehicle, real or simulated, in one documented file format.
+
+A recording is a table, stored as CSV or Parquet, plus a little JSON metadata. Rows are samples;
+rows are counted from 0 (the CSV header is not a row).
+
+Columns
+    ``time``
+        Sample time in seconds, strictly increasing. The step must be uniform (every step within a
+        relative 1e-3 of the median step) unless the reader is called with
+        ``require_uniform=False``.
+    one column per model input
+        Named as in the model's ``input_names`` (for ``usv``: ``delta``). All are required.
+    one column per measured channel
+        Named as in the model's ``state_names`` (for ``usv``: ``v, r, psi, p, phi``). Channels that
+        were not measured are simply absent, but at least one must be present.
+
+    No other columns are allowed, every value must be a finite number and there must be at least
+    two rows.
+
+Metadata, a JSON object
+    ``model`` (required)
+        Name of the vehicle model, one of :func:`marine_envs.models.model_names`.
+    ``params`` (optional)
+        Parameter overrides by MODELS.md symbol, e.g. ``{"wn": 0.7}``; validated by the model.
+    ``units`` (optional)
+        Unit of each column, e.g. ``{"time": "s", "phi": "deg"}``. Columns not listed are in the
+        model's SI units. A unit in :data:`UNIT_CONVERSIONS` (degrees, knots, milliseconds, ...)
+        is converted to SI once, when the file is read; any other unit must equal the SI unit.
+        Files written by :func:`write_recording` are always in SI units and say so.
+    any other key
+        Free-form information (environment id, seed, dt, policy, ...) that is kept in
+        :attr:`Recording.meta` and written back unchanged.
+
+    Parquet stores the metadata in the file's schema metadata under the key ``marine_envs``. CSV
+    stores it in a sidecar file named after the data file plus ``.json`` (``run.csv`` ->
+    ``run.csv.json``); a sidecar that replaces the suffix (``run.json``) is also read. A CSV without
+    sidecar can be read only by naming the model: ``read_recording("run.csv", model="usv")``.
+
+Example, ``run.csv``::
+
+    time,delta,psi,phi
+    0.0,0.0,0.0,0.0
+    0.1,0.05,0.001,-0.002
+    ...
+
+and ``run.csv.json``::
+
+    {"model": "usv", "params": {"wn": 0.7}, "units": {"time": "s", "delta": "deg", "psi": "deg",
+     "phi": "deg"}, "seed": 3, "policy": "lqr"}
+
+Reading checks all of the above and raises ``ValueError`` naming the offending column or row.
+Parquet support needs pyarrow: ``pip install "marine-envs[parquet]"``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import InitVar, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import ArrayLike
+
+from .models import VehicleModel, get_model
+
+#: Key of the metadata in the Parquet schema metadata.
+METADATA_KEY = "marine_envs"
+#: Metadata keys with a meaning of their own; every other key goes to :attr:`Recording.meta`.
+RESERVED_KEYS = ("model", "params", "units")
+TIME = "time"
+#: A time step may differ from the median step by this fraction before it counts as non-uniform.
+UNIFORM_RTOL = 1e-3
+#: Non-SI units accepted in the metadata: unit -> (SI unit, factor to multiply by).
+UNIT_CONVERSIONS: dict[str, tuple[str, float]] = {
+    "ms": ("s", 1e-3),
+    "min": ("s", 60.0),
+    "deg": ("rad", math.pi / 180),
+    "deg/s": ("rad/s", math.pi / 180),
+    "deg/s^2": ("rad/s^2", math.pi / 180),
+    "kn": ("m/s", 1852 / 3600),
+    "knot": ("m/s", 1852 / 3600),
+    "knots": ("m/s", 1852 / 3600),
+    "km/h": ("m/s", 1 / 3.6),
+    "mm": ("m", 1e-3),
+    "cm": ("m", 1e-2),
+    "km": ("m", 1e3),
+}
+_PARQUET_HINT = 'Parquet recordings need pyarrow: pip install "marine-envs[parquet]"'
+# pandas < 3 parses floats with a fast but not always exact converter; 3.x is exact by default.
+_CSV_READ_OPTIONS: dict[str, Any] = (
+    {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
+)
+
+
+@dataclass(eq=False, repr=False)  # eq on DataFrames is elementwise, so compare explicitly
+class Recording:
+    """A validated recording in SI units (see the module docstring for the format).
+
+    :param data: columns ``time`` (s), the model's inputs, then the measured channels, in model
+        order and SI units; any column order is accepted and normalised.
+    :param model: model name, see :func:`marine_envs.models.model_names`.
+    :param params: parameter overrides by MODELS.md symbol (SI units).
+    :param meta: free-form extra metadata (env id, seed, dt, policy, ...); JSON-serialisable.
+    :param require_uniform: reject a non-uniform time step (not stored).
+    :raises ValueError: the recording breaks the format; the message names the column or row.
+    """
+
+    data: pd.DataFrame
+    model: str
+    params: dict[str, float] = field(default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+    require_uniform: InitVar[bool] = True
+
+    def __post_init__(self, require_uniform: bool) -> None:
+        self.validate(require_uniform)
+        self.params = dict(self.params)
+        self.meta = dict(self.meta)
+        # A float64 copy in canonical column order, so callers' frames are never aliased.
+        self.data = self.data[list(self.units)].astype(float).reset_index(drop=True)
+
+    @classmethod
+    def from_arrays(
+        cls,
+        model: str,
+        time: ArrayLike,
+        inputs: ArrayLike,
+        measurements: Mapping[str, ArrayLike],
+        params: Mapping[str, float] | None = None,
+        meta: Mapping[str, Any] | None = None,
+        *,
+        require_uniform: bool = True,
+    ) -> Recording:
+        """Build and validate a recording from arrays in SI units.
+
+        :param model: model name.
+        :param time: sample times, s, shape ``(n,)``.
+        :param inputs: model inputs in the model's SI units, shape ``(n, n_u)``; ``(n,)`` is
+            accepted for a single-input model.
+        :param measurements: measured channels by state name, each shape ``(n,)``, SI units.
+        :param params: parameter overrides by MODELS.md symbol.
+        :param meta: free-form extra metadata.
+        :param require_uniform: reject a non-uniform time step.
+        """
+        vehicle = _vehicle(model, params or {})
+        time = np.asarray(time)
+        inputs = np.asarray(inputs)
+        if inputs.ndim == 1 and len(vehicle.input_names) == 1:
+            inputs = inputs[:, None]
+        if inputs.ndim != 2 or inputs.shape[1] != len(vehicle.input_names):
+            raise ValueError(f"inputs must have shape (n, {len(vehicle.input_names)}) for columns "
+                             f"{', '.join(vehicle.input_names)}; got shape {inputs.shape}")
+        unknown = [name for name in measurements if name not in vehicle.state_names]
+        if unknown:
+            raise ValueError(f"unknown measured channel(s) {unknown} for model {model!r}; "
+                             f"allowed: {', '.join(vehicle.state_names)}")
+        columns = {TIME: time, **dict(zip(vehicle.input_names, inputs.T, strict=True))}
+        columns.update({name: np.asarray(values) for name, values in measurements.items()})
+        for name, values in columns.items():
+            if values.shape != (len(time),):
+                raise ValueError(f"column {name!r} must have shape ({len(time)},) like time; "
+                                 f"got {values.shape}")
+        return cls(pd.DataFrame(columns), model, dict(params or {}), dict(meta or {}),
+                   require_uniform=require_uniform)
+
+    def validate(self, require_uniform: bool = True) -> None:
+        """Check the recording against the format.
+
+        :param require_uniform: also require a uniform time step (relative tolerance
+            :data:`UNIFORM_RTOL` of the median step).
+        :raises ValueError: naming the offending column, row, parameter or metadata key.
+        """
+        vehicle = _vehicle(self.model, self.params)
+        _check_meta(self.meta)
+        if not isinstance(self.data, pd.DataFrame):
+            raise ValueError(f"data must be a pandas DataFrame, got {type(self.data).__name__}")
+        _check_columns(self.data, vehicle)
+        if len(self.data) < 2:
+            raise ValueError(f"recording has {len(self.data)} row(s); at least 2 rows are needed")
+        values = {name: _numeric(self.data[name], name) for name in _canonical(self.data, vehicle)}
+        _check_finite(values)
+        _check_time(values[TIME], require_uniform)
+
+    # -- views ---------------------------------------------------------------------------------
+    @property
+    def time(self) -> np.ndarray:
+        """Sample times, s, shape ``(n,)``."""
+        return self.data[TIME].to_numpy(dtype=float)
+
+    @property
+    def dt(self) -> float:
+        """Sampling period, s: the median time step (the step itself when sampling is uniform)."""
+        return float(np.median(np.diff(self.time)))
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        """Input columns, in model order."""
+        return get_model(self.model).input_names
+
+    @property
+    def measured_names(self) -> tuple[str, ...]:
+        """Measured channels present in the recording, in model (state) order."""
+        return tuple(n for n in get_model(self.model).state_names if n in self.data.columns)
+
+    @property
+    def inputs(self) -> np.ndarray:
+        """Inputs in SI units, shape ``(n, len(input_names))``."""
+        return self.data[list(self.input_names)].to_numpy(dtype=float)
+
+    @property
+    def measurements(self) -> np.ndarray:
+        """Measured channels in SI units, shape ``(n, len(measured_names))``."""
+        return self.data[list(self.measured_names)].to_numpy(dtype=float)
+
+    @property
+    def units(self) -> dict[str, str]:
+        """SI unit of every column, in column order (time, inputs, measured channels)."""
+        vehicle = get_model(self.model)
+        si = _si_units(vehicle)
+        return {name: si[name] for name in _canonical(self.data, vehicle)}
+
+    def __repr__(self) -> str:
+        return (f"Recording(model={self.model!r}, params={self.params!r}, n={len(self.data)}, "
+                f"measured={self.measured_names!r}, meta={self.meta!r})")
+
+
+# -- writing ---------------------------------------------------------------------------------
+def write_recording(recording: Recording, path: str | Path) -> Path:
+    """Write ``recording`` in SI units, choosing the format from the suffix of ``path``.
+
+    ``.csv`` writes the table and a JSON sidecar ``<path>.json``; ``.parquet`` writes one file
+    with the metadata in its schema (needs pyarrow).
+
+    :param recording: the recording; it is re-validated (allowing non-uniform sampling).
+    :param path: destination, ending in ``.csv`` or ``.parquet``.
+    :return: the path of the data file.
+    :raises ValueError: unsupported suffix or an invalid recording.
+    """
+    path = Path(path)
+    writer = _format(path)[0]
+    recording.validate(require_uniform=False)
+    metadata = {"model": recording.model, "params": dict(recording.params),
+                "units": recording.units, **recording.meta}
+    writer(recording.data[list(recording.units)], metadata, path)
+    return path
+
+
+def _write_csv(data: pd.DataFrame, metadata: dict[str, Any], path: Path) -> None:
+    text = json.dumps(metadata, indent=2, default=_json_default) + "\n"  # fail before writing
+    data.to_csv(path, index=False)  # pandas writes floats with repr: exact round trip
+    _sidecars(path)[0].write_text(text, encoding="utf-8")
+
+
+def _write_parquet(data: pd.DataFrame, metadata: dict[str, Any], path: Path) -> None:
+    pa, pq = _pyarrow()
+    text = json.dumps(metadata, default=_json_default)
+    table = pa.Table.from_pandas(data, preserve_index=False)
+    # Keep pandas' own schema metadata next to ours.
+    merged = {**(table.schema.metadata or {}), METADATA_KEY.encode(): text.encode()}
+    pq.write_table(table.replace_schema_metadata(merged), path)
+
+
+def _json_default(value: Any) -> Any:
+    """Let numpy scalars and arrays (seeds, dt, ...) into the JSON metadata."""
+    if isinstance(value, np.generic | np.ndarray):
+        return value.tolist()
+    raise TypeError(f"metadata value {value!r} of type {type(value).__name__} is not "
+                    "JSON-serialisable")
+
+
+# -- reading ---------------------------------------------------------------------------------
+def read_recording(
+    path: str | Path, model: str | None = None, *, require_uniform: bool = True
+) -> Recording:
+    """Read and validate a recording, converting its columns to SI units.
+
+    :param path: a ``.csv`` (with sidecar ``<path>.json`` or ``<stem>.json``) or ``.parquet``
+        file.
+    :param model: expected model name; required for a file without metadata.
+    :param require_uniform: reject a non-uniform time step.
+    :raises FileNotFoundError: ``path`` does not exist.
+    :raises ValueError: unsupported suffix, wrong or unknown model, invalid parameters, unknown
+        units, or a table that breaks the format; the message names the file and the offending
+        column, row, unit or parameter.
+    :raises ImportError: a Parquet file without pyarrow installed.
+    """
+    path = Path(path)
+    reader = _format(path)[1]
+    if not path.is_file():
+        raise FileNotFoundError(f"recording not found: {path}")
+    try:
+        data, metadata, where = reader(path)
+        return _from_table(data, metadata, where, model, require_uniform)
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+
+
+def _from_table(data: pd.DataFrame, metadata: dict[str, Any] | None, where: str,
+                model: str | None, require_uniform: bool) -> Recording:
+    """The recording of a freshly read table and its metadata (``None`` if the file had none)."""
+    if metadata is None and model is None:
+        raise ValueError(f"no metadata found ({where}); pass model=... to read the file as SI "
+                         "units with nominal parameters")
+    meta = dict(metadata or {})
+    named = meta.pop("model", None)
+    if named is None and model is None:
+        raise ValueError(f"metadata ({where}) has no 'model' key; pass model=...")
+    if named is not None and model is not None and named != model:
+        raise ValueError(f"recording is for model {named!r}, not {model!r}")
+    name = named if named is not None else model
+    params = meta.pop("params", None) or {}
+    data = _to_si(data, meta.pop("units", None) or {}, get_model(name))
+    return Recording(data, name, params, meta, require_uniform=require_uniform)
+
+
+def _read_csv(path: Path) -> tuple[pd.DataFrame, dict[str, Any] | None, str]:
+    data = pd.read_csv(path, skipinitialspace=True, **_CSV_READ_OPTIONS)
+    sidecars = _sidecars(path)
+    where = f"sidecar {sidecars[0].name} or {sidecars[1].name}"
+    for sidecar in sidecars:  # the canonical name wins if both exist
+        if sidecar.is_file():
+            return data, _parse_metadata(sidecar.read_text(encoding="utf-8"), sidecar.name), where
+    return data, None, where
+
+
+def _read_parquet(path: Path) -> tuple[pd.DataFrame, dict[str, Any] | None, str]:
+    _, pq = _pyarrow()
+    table = pq.read_table(path)
+    raw = (table.schema.metadata or {}).get(METADATA_KEY.encode())
+    where = f"Parquet schema metadata key {METADATA_KEY!r}"
+    metadata = None if raw is None else _parse_metadata(raw.decode("utf-8"), where)
+    return table.to_pandas(), metadata, where
+
+
+def _sidecars(path: Path) -> tuple[Path, Path]:
+    """Sidecar names of a CSV file: ``run.csv.json`` (written) and ``run.json`` (also read)."""
+    return path.with_name(path.name + ".json"), path.with_suffix(".json")
+
+
+def _parse_metadata(text: str, source: str) -> dict[str, Any]:
+    try:
+        metadata = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"invalid JSON in {source}: {exc}") from None
+    if not isinstance(metadata, dict):
+        raise ValueError(f"{source} must hold a JSON object, got {type(metadata).__name__}")
+    return metadata
+
+
+def _to_si(data: pd.DataFrame, units: Any, vehicle: VehicleModel) -> pd.DataFrame:
+    """``data`` with every column converted from its unit in the metadata to SI."""
+    if not isinstance(units, Mapping):
+        raise ValueError(f"'units' metadata must map column names to units, got {units!r}")
+    si = _si_units(vehicle)
+    unknown = [name for name in units if name not in si]
+    if unknown:
+        raise ValueError(f"units given for unknown column(s) {unknown} of model "
+                         f"{vehicle.name!r}; allowed: {', '.join(si)}")
+    data = data.copy()
+    for name, unit in units.items():
+        factor = _si_factor(name, unit, si[name])
+        # A non-numeric column is left for validate() to report with its row.
+        if factor != 1.0 and name in data.columns and _is_numeric(data[name]):
+            data[name] = data[name].astype(float) * factor
+    return data
+
+
+def _si_factor(column: str, unit: Any, expected: str) -> float:
+    """Factor converting ``column`` from ``unit`` to its SI unit ``expected``."""
+    if unit == expected:
+        return 1.0
+    target, factor = UNIT_CONVERSIONS.get(unit, ("", 0.0)) if isinstance(unit, str) else ("", 0.0)
+    if target != expected:
+        convertible = sorted(u for u, (si, _) in UNIT_CONVERSIONS.items() if si == expected)
+        raise ValueError(f"column {column!r} has unit {unit!r}, which does not convert to its SI "
+                         f"unit {expected!r}; accepted: {', '.join([expected, *convertible])}")
+    return factor
+
+
+def _format(path: Path) -> tuple[Callable[..., None], Callable[[Path], Any]]:
+    """Writer and reader for the suffix of ``path``."""
+    formats = {".csv": (_write_csv, _read_csv), ".parquet": (_write_parquet, _read_parquet)}
+    try:
+        return formats[path.suffix.lower()]
+    except KeyError:
+        raise ValueError(f"unsupported recording suffix {path.suffix!r} ({path}); use .csv or "
+                         ".parquet") from None
+
+
+def _pyarrow() -> tuple[Any, Any]:
+    """``(pyarrow, pyarrow.parquet)``, imported lazily so that CSV works without them."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError as exc:
+        raise ImportError(_PARQUET_HINT) from exc
+    return pa, pq
+
+
+# -- validation ------------------------------------------------------------------------------
+def _vehicle(model: str, params: Any) -> VehicleModel:
+    """The model named ``model`` with ``params`` applied; raises ``ValueError`` if invalid."""
+    if not isinstance(params, Mapping):
+        raise ValueError(f"params must map parameter names to values, got {params!r}")
+    try:
+        return get_model(model, **params)
+    except TypeError as exc:  # e.g. a string where a number is due
+        raise ValueError(f"invalid params {dict(params)!r} for model {model!r}: {exc}") from exc
+
+
+def _check_meta(meta: Any) -> None:
+    if not isinstance(meta, Mapping):
+        raise ValueError(f"meta must be a mapping, got {type(meta).__name__}")
+    clash = [key for key in RESERVED_KEYS if key in meta]
+    if clash:
+        raise ValueError(f"meta key(s) {clash} are reserved; use Recording.model, .params and "
+                         "the column units instead")
+
+
+def _check_columns(data: pd.DataFrame, vehicle: VehicleModel) -> None:
+    columns = list(data.columns)
+    allowed = (TIME, *vehicle.input_names, *vehicle.state_names)
+    duplicated = sorted({str(c) for c in data.columns[data.columns.duplicated()]})
+    if duplicated:
+        raise ValueError(f"duplicate column(s) {duplicated}")
+    unknown = [c for c in columns if c not in allowed]
+    if unknown:
+        raise ValueError(f"unknown column(s) {unknown} for model {vehicle.name!r}; allowed: "
+                         f"{', '.join(allowed)}")
+    if TIME not in columns:
+        raise ValueError(f"missing column {TIME!r} (sample times in s)")
+    missing = [name for name in vehicle.input_names if name not in columns]
+    if missing:
+        raise ValueError(f"missing input column(s) {missing} for model {vehicle.name!r}; every "
+                         f"input is required: {', '.join(vehicle.input_names)}")
+    if not any(name in columns for name in vehicle.state_names):
+        raise ValueError(f"no measured channel: at least one of the columns "
+                         f"{', '.join(vehicle.state_names)} is required")
+
+
+def _canonical(data: pd.DataFrame, vehicle: VehicleModel) -> list[str]:
+    """Column order of the format: time, inputs, measured channels in model order."""
+    present = set(data.columns)
+    measured = [name for name in vehicle.state_names if name in present]
+    return [TIME, *vehicle.input_names, *measured]
+
+
+def _is_numeric(column: pd.Series) -> bool:
+    # Booleans and complex numbers are not measurements; nullable Int64/Float64 are fine.
+    return pd.api.types.is_integer_dtype(column) or pd.api.types.is_float_dtype(column)
+
+
+def _numeric(column: pd.Series, name: str) -> np.ndarray:
+    """``column`` as float64; raises ``ValueError`` naming the column and first bad row."""
+    if not _is_numeric(column):
+        coerced = pd.to_numeric(column, errors="coerce")
+        bad = np.flatnonzero(coerced.isna().to_numpy() & column.notna().to_numpy())
+        where = f": row {bad[0]} is {column.iloc[bad[0]]!r}" if bad.size else ""
+        raise ValueError(f"column {name!r} is not numeric (dtype {column.dtype}){where}")
+    return column.to_numpy(dtype=float, na_value=np.nan)
+
+
+def _check_finite(values: dict[str, np.ndarray]) -> None:
+    time = values[TIME]
+    for name, column in values.items():  # time first, so a later row's time is trustworthy
+        bad = np.flatnonzero(~np.isfinite(column))
+        if bad.size:
+            row = bad[0]
+            when = "" if name == TIME else f" (time {time[row]:.10g} s)"
+            raise ValueError(f"column {name!r} has non-finite value {column[row]} at row "
+                             f"{row}{when}")
+
+
+def _check_time(time: np.ndarray, require_uniform: bool) -> None:
+    step = np.diff(time)
+    bad = np.flatnonzero(step <= 0)
+    if bad.size:
+        row = bad[0] + 1
+        raise ValueError(f"time is not strictly increasing at row {row}: {time[row]:.10g} s "
+                         f"follows {time[row - 1]:.10g} s at row {row - 1}")
+    if not require_uniform:
+        return
+    expected = float(np.median(step))
+    bad = np.flatnonzero(np.abs(step - expected) > UNIFORM_RTOL * expected)
+    if bad.size:
+        row = bad[0] + 1
+        raise ValueError(f"non-uniform time step at row {row}: step {step[row - 1]:.6g} s (from "
+                         f"{time[row - 1]:.10g} s to {time[row]:.10g} s) vs expected "
+                         f"{expected:.6g} s (median step); pass require_uniform=False to accept "
+                         "non-uniform sampling")
+
+
+def _si_units(vehicle: VehicleModel) -> dict[str, str]:
+    """SI unit of every column the model allows."""
+    return {TIME: "s", **dict(zip(vehicle.input_names, vehicle.input_units, strict=True)),
+            **dict(zip(vehicle.state_names, vehicle.state_units, strict=True))}
+
+
+__all__ = ["METADATA_KEY", "UNIT_CONVERSIONS", "Recording", "read_recording", "write_recording"]

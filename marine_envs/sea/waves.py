@@ -1,0 +1,275 @@
+"""Sea states and wave realisations that step cheaply and reproducibly.
+
+Choice of realisation: **random-phase superposition stepped by rotating phasors.** Each of N
+wave components is a complex phasor ``Z_j = exp(i(omega_e,j t + eps_j))``; a step multiplies it by
+the constant ``exp(i omega_e,j dt)`` and every disturbance channel is ``Re(sum_j Z_j G_jc)``, where
+``G_jc = a_j H_c(omega_j)`` carries the component amplitude ``a_j`` and the vessel's response
+``H_c`` (see :mod:`marine_envs.sea.coupling`). Why this and not the alternatives:
+
+* unlike a fitted low-order shaping filter it reproduces *any* spectrum (PM, JONSWAP, a measured
+  bimodal buoy spectrum) to the resolution of the frequency grid, with no fitting step;
+* unlike evaluating ``cos(omega t + eps)`` it costs one complex multiply per component per step,
+  and unlike a pre-computed FFT block it has no episode-length limit or per-episode synthesis cost;
+* it is exact at the moving vessel: the phase advances at the (signed) encounter frequency while
+  the amplitude and the vessel response use the absolute wave frequency, so following seas fold
+  correctly without binning;
+* randomness is only the phases, drawn at reset from the boat's own generator: reproducible by
+  seed, and a batch of boats equals the same boats simulated one by one.
+
+Components split the band holding 99.8 % of the energy into bins of equal energy (so they crowd
+where the spectrum is high, not on its long omega^-5 tail); each component's variance is its bin's
+integrated energy, so Hs is exact by construction. Within its bin a component sits at an
+energy fraction given by a golden-ratio sequence, so no two are commensurate (a uniform grid
+would repeat the record every ``2 pi / d_omega`` seconds).
+
+A significant wave height that varies in time (:class:`Schedule`) scales the amplitudes each step;
+when the spectral shape itself follows Hs (the one-parameter PM, ``tp=None``) the amplitudes are
+tabulated over Hs and interpolated.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Sequence
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .spectra import MeasuredSpectrum, jonswap, pierson_moskowitz
+
+G = 9.81  #: gravity, m/s^2
+_GOLDEN = (math.sqrt(5) - 1) / 2
+Coupling = Callable[[NDArray[np.float64]], NDArray[np.complex128]]
+
+
+def encounter_frequency(omega: ArrayLike, speed: float, heading: float) -> NDArray[np.float64]:
+    """Encounter frequency ``|omega - omega^2 U cos(beta) / g|`` (rad/s), deep water.
+
+    :param omega: wave frequency, rad/s.
+    :param speed: vessel speed U, m/s.
+    :param heading: encounter angle beta, rad, Fossen's convention: pi = head seas, 0 = following.
+    """
+    omega = np.asarray(omega, dtype=float)
+    return np.abs(omega - omega**2 * speed * math.cos(heading) / G)
+
+
+@dataclasses.dataclass(frozen=True)
+class Schedule:
+    """A quantity that varies in time, piecewise linear through ``(time, value)`` points and held
+    constant before the first and after the last point.
+
+    :param times: strictly increasing times, s.
+    :param values: values at those times (e.g. significant wave height, m; must be > 0).
+    """
+
+    times: tuple[float, ...]
+    values: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        t, v = np.asarray(self.times, dtype=float), np.asarray(self.values, dtype=float)
+        if t.ndim != 1 or t.shape != v.shape or t.size == 0:
+            raise ValueError("schedule needs equal, non-empty lists of times and values")
+        if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
+            raise ValueError(f"schedule times {t.tolist()} must be finite and strictly increasing")
+        if not np.all(np.isfinite(v) & (v > 0)):
+            raise ValueError(f"schedule values {v.tolist()} must be finite and > 0")
+
+    @classmethod
+    def from_points(cls, points: Sequence[Sequence[float]]) -> Schedule:
+        """From ``[(t0, v0), (t1, v1), ...]``."""
+        times, values = zip(*points, strict=True)
+        return cls(tuple(map(float, times)), tuple(map(float, values)))
+
+    def __call__(self, t: ArrayLike) -> NDArray[np.float64]:
+        return np.interp(t, self.times, self.values)
+
+    @property
+    def low(self) -> float:
+        return min(self.values)
+
+    @property
+    def high(self) -> float:
+        return max(self.values)
+
+
+@dataclasses.dataclass(frozen=True)
+class SeaState:
+    """A (possibly time-varying) sea state.
+
+    :param hs: significant wave height, m: a number, a :class:`Schedule`, a list of
+        ``(t, hs)`` points, or ``None`` to keep a measured spectrum's own level.
+    :param tp: peak (modal) period, s. ``None`` with ``spectrum="pm"`` gives the one-parameter
+        Pierson-Moskowitz spectrum whose peak follows Hs (omega_p = 1.2561/sqrt(Hs)).
+    :param spectrum: ``"pm"``, ``"jonswap"`` or a :class:`MeasuredSpectrum` (e.g. an NDBC record).
+    :param gamma: JONSWAP peak-enhancement factor.
+    """
+
+    hs: float | Schedule | Sequence[Sequence[float]] | None = 2.0
+    tp: float | None = 8.0
+    spectrum: Literal["pm", "jonswap"] | MeasuredSpectrum = "pm"
+    gamma: float = 3.3
+
+    def __post_init__(self) -> None:
+        hs = self.hs
+        if hs is not None and not isinstance(hs, Schedule):
+            if isinstance(hs, Sequence):
+                hs = Schedule.from_points(hs)
+            elif not (math.isfinite(hs) and hs > 0):
+                raise ValueError(f"hs={hs!r} is invalid: significant wave height must be > 0 m")
+            object.__setattr__(self, "hs", hs)
+        if self.tp is not None and not (math.isfinite(self.tp) and self.tp > 0):
+            raise ValueError(f"tp={self.tp!r} is invalid: peak period must be > 0 s")
+        measured = isinstance(self.spectrum, MeasuredSpectrum)
+        if not measured and self.spectrum not in ("pm", "jonswap"):
+            raise ValueError(f"spectrum={self.spectrum!r} is invalid: 'pm', 'jonswap' or a "
+                             "MeasuredSpectrum")
+        if self.hs is None and not measured:
+            raise ValueError("hs=None is only meaningful with a measured spectrum")
+        if self.tp is None and self.spectrum == "jonswap":
+            raise ValueError("tp=None is invalid for a JONSWAP spectrum: give the peak period")
+
+    @property
+    def varying(self) -> bool:
+        """True when the significant wave height follows a schedule."""
+        return isinstance(self.hs, Schedule)
+
+    @property
+    def shape_follows_hs(self) -> bool:
+        """True when the spectral shape (not only its level) changes with Hs."""
+        return self.spectrum == "pm" and self.tp is None
+
+    def hs_range(self) -> tuple[float, float]:
+        """Lowest and highest significant wave height, m."""
+        if self.hs is None:
+            hs = self.spectrum.hs  # type: ignore[union-attr]
+            return hs, hs
+        if isinstance(self.hs, Schedule):
+            return self.hs.low, self.hs.high
+        return float(self.hs), float(self.hs)
+
+    def density(self, omega: ArrayLike, hs: float | None = None) -> NDArray[np.float64]:
+        """Spectral density S(omega), m^2 s/rad, at significant wave height ``hs`` (m)."""
+        hs = self.hs_range()[1] if hs is None else hs
+        if isinstance(self.spectrum, MeasuredSpectrum):
+            return self.spectrum(omega) * (hs / self.spectrum.hs) ** 2
+        if self.spectrum == "jonswap":
+            return jonswap(omega, hs, self.tp, self.gamma)
+        return pierson_moskowitz(omega, hs, self.tp)
+
+
+def elevation_coupling(omega: NDArray[np.float64]) -> NDArray[np.complex128]:
+    """The identity coupling: one channel, the wave elevation at the vessel (m)."""
+    return np.ones((omega.size, 1), dtype=complex)
+
+
+def _fine_grid(sea: SeaState) -> NDArray[np.float64]:
+    if isinstance(sea.spectrum, MeasuredSpectrum):
+        return np.linspace(sea.spectrum.omega[0], sea.spectrum.omega[-1], 4000)
+    return np.linspace(0.01, 40.0, 20000)
+
+
+def _cumulative_energy(sea: SeaState, grid: NDArray[np.float64], hs: float | None):
+    """Energy (m^2) below each grid frequency, trapezoid rule."""
+    s = sea.density(grid, hs)
+    return np.concatenate([[0.0], np.cumsum(0.5 * (s[1:] + s[:-1]) * np.diff(grid))])
+
+
+def energy_band(sea: SeaState, fraction: float = 0.998) -> tuple[float, float]:
+    """Frequency band (rad/s) holding ``fraction`` of the wave energy at every Hs of ``sea``."""
+    grid, tail = _fine_grid(sea), (1 - fraction) / 2
+    lows, highs = [], []
+    for hs in sea.hs_range():
+        cumulative = _cumulative_energy(sea, grid, hs)
+        cumulative /= cumulative[-1]
+        lows.append(np.interp(tail, cumulative, grid))
+        highs.append(np.interp(1 - tail, cumulative, grid))
+    return min(lows), max(highs)
+
+
+class WaveRealisation:
+    """Batched, seedable wave disturbance at a moving vessel (see the module docstring).
+
+    :param sea: the sea state.
+    :param coupling: maps wave frequencies (rad/s, shape (N,)) to complex responses (N, C): the
+        amplitude and phase of each disturbance channel per metre of wave amplitude.
+    :param dt: time step, s.
+    :param speed: vessel speed, m/s.
+    :param heading: encounter angle beta, rad (pi = head seas).
+    :param n_components: number of wave components N.
+    """
+
+    def __init__(self, sea: SeaState, coupling: Coupling = elevation_coupling, *, dt: float,
+                 speed: float = 0.0, heading: float = math.pi, n_components: int = 64) -> None:
+        if not (isinstance(n_components, int) and n_components >= 1):
+            raise ValueError(f"n_components={n_components!r} is invalid: an integer >= 1")
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt={dt!r} is invalid: must be > 0 s")
+        if not (math.isfinite(speed) and speed >= 0):
+            raise ValueError(f"speed={speed!r} is invalid: must be >= 0 m/s")
+        self.sea, self.dt = sea, dt
+        grid = _fine_grid(sea)
+        # equal-energy bins of the most energetic sea, between the 0.1 % and 99.9 % fractions
+        cumulative = _cumulative_energy(sea, grid, sea.hs_range()[1])
+        fraction = cumulative / cumulative[-1]
+        edges = np.linspace(0.001, 0.999, n_components + 1)
+        jitter = (0.5 + _GOLDEN * np.arange(n_components)) % 1.0
+        #: wave frequencies (rad/s) and signed encounter frequencies (rad/s)
+        self.omega = np.interp(edges[:-1] + jitter * np.diff(edges), fraction, grid)
+        self._grid, self._edges = grid, np.interp(edges, fraction, grid)
+        self.omega_e = self.omega - self.omega**2 * speed * math.cos(heading) / G
+        self._rotation = np.exp(1j * self.omega_e * dt)
+        response = np.asarray(coupling(self.omega), dtype=complex)
+        self.n_channels = response.shape[1]
+        self._hs_grid: NDArray[np.float64] | None = None
+        if sea.varying and sea.shape_follows_hs:
+            # amplitudes tabulated over Hs (2 % steps) and interpolated in between
+            lo, hi = sea.hs_range()
+            self._hs_grid = np.geomspace(lo, hi, max(2, int(np.log(hi / lo) / 0.02) + 2))
+            self._gain_table = np.stack([self._amplitude(hs)[:, None] * response
+                                         for hs in self._hs_grid])
+        elif sea.varying:
+            self._gain = self._amplitude(1.0)[:, None] * response  # amplitude scales with Hs
+        else:
+            self._gain = self._amplitude(None)[:, None] * response
+
+    def _amplitude(self, hs: float | None) -> NDArray[np.float64]:
+        """Component amplitudes (m): sqrt(2 x energy of each bin) at significant height hs."""
+        energy = np.interp(self._edges, self._grid, _cumulative_energy(self.sea, self._grid, hs))
+        return np.sqrt(2 * np.diff(energy))
+
+    # -- batched state ---------------------------------------------------------------------------
+    def bind(self, batch_size: int) -> None:
+        """Allocate phasors for ``batch_size`` boats."""
+        self.phasor = np.ones((batch_size, self.omega.size), dtype=complex)
+        self.time = np.zeros(batch_size)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        """New random phases for boats ``idx`` from their generators; their time restarts at 0."""
+        for i, rng in zip(idx, rngs, strict=True):
+            self.phasor[i] = np.exp(1j * rng.uniform(0.0, 2 * math.pi, self.omega.size))
+        self.time[idx] = 0.0
+
+    def step(self) -> NDArray[np.float64]:
+        """Disturbance (batch x channels) at the current time; then advance by ``dt``."""
+        if self._hs_grid is not None:
+            hs = self.sea.hs(self.time)  # type: ignore[operator]
+            pos = np.interp(hs, self._hs_grid, np.arange(self._hs_grid.size))
+            k = np.minimum(pos.astype(np.intp), self._hs_grid.size - 2)
+            w = (pos - k)[:, None, None]
+            gain = (1 - w) * self._gain_table[k] + w * self._gain_table[k + 1]
+            value = np.einsum("bn,bnc->bc", self.phasor, gain).real
+        else:
+            value = (self.phasor @ self._gain).real
+            if self.sea.varying:
+                value *= self.sea.hs(self.time)[:, None]  # type: ignore[operator]
+        self.phasor *= self._rotation
+        self.time += self.dt
+        return value
+
+    def sample(self, n_steps: int, rng: np.random.Generator) -> NDArray[np.float64]:
+        """One boat's realisation over ``n_steps`` steps (n_steps x channels), for analysis."""
+        self.bind(1)
+        self.reset(np.array([0]), [rng])
+        return np.concatenate([self.step() for _ in range(n_steps)])

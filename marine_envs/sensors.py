@@ -1,0 +1,376 @@
+"""Sensors: what the vehicle's instruments make of its true state.
+
+A :class:`SensorSuite` maps true channel values ``z`` (batch x channels, SI units) to measurements
+through a chain of small stages, each configured per channel and vectorised over the batch::
+
+    bias -> Gaussian noise -> angle wrapping -> quantizer -> delay -> dropout (hold last value)
+
+Every stage works on a batch of independent sensor suites (one per boat of a vector environment).
+Randomness comes from each boat's own ``np.random.Generator`` (handed down from
+``reset(seed=...)``) and is drawn in blocks, so a batch of boats consumes exactly the random
+streams that the same boats would consume one by one: a batched environment equals N single ones.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+Draw = Callable[[np.random.Generator, int, int], FloatArray]
+
+#: Steps of random numbers drawn at a time from each boat's generator.
+BLOCK = 256
+
+
+def per_channel(name: str, value: float | Mapping[str, float] | None, channels: Sequence[str],
+                default: float = 0.0) -> FloatArray:
+    """Expand a scalar or a ``{channel: value}`` mapping to one value per channel.
+
+    :raises ValueError: a channel name that is not one of ``channels``, naming the argument.
+    """
+    if value is None:
+        return np.full(len(channels), default, dtype=float)
+    if isinstance(value, Mapping):
+        unknown = sorted(set(value) - set(channels))
+        if unknown:
+            raise ValueError(f"{name}: unknown channel(s) {unknown}; channels are "
+                             f"{', '.join(channels)}")
+        return np.array([float(value.get(c, default)) for c in channels])
+    return np.full(len(channels), float(value))
+
+
+class Stage:
+    """One step of the measurement chain. Subclasses override :meth:`__call__`, which may
+    overwrite its input array (the suite owns it) and returns the stage's output."""
+
+    def bind(self, batch_size: int) -> None:
+        """Allocate per-boat state for ``batch_size`` boats."""
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        """Start new episodes for boats ``idx`` (``rngs[i]`` is boat ``idx[i]``'s generator)."""
+
+    def __call__(self, z: FloatArray) -> FloatArray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+def _as_index(idx: NDArray[np.intp]) -> slice | NDArray[np.intp]:
+    """A slice when the indices are contiguous (basic indexing is much cheaper than fancy)."""
+    if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
+        return slice(int(idx[0]), int(idx[0]) + idx.size)
+    return idx
+
+
+class _RandomBlocks:
+    """Per-boat random numbers, drawn ``BLOCK`` steps at a time from each boat's generator.
+
+    Blocks of all boats lie in one (batch*BLOCK) x width array; ``cursor`` holds each boat's next
+    row, so a step is one gather and one increment.
+    """
+
+    def __init__(self, draw: Draw, width: int) -> None:
+        self.draw, self.width = draw, width
+
+    def bind(self, batch_size: int) -> None:
+        self.rows = np.zeros((batch_size * BLOCK, self.width))
+        self.first_row = np.arange(batch_size) * BLOCK
+        self.cursor = self.first_row.copy()
+        self.rngs: list[np.random.Generator | None] = [None] * batch_size
+        self._countdown = BLOCK  # steps until the first boat runs out
+
+    def _refill(self, i: int) -> None:
+        start = self.first_row[i]
+        self.rows[start:start + BLOCK] = self.draw(self.rngs[i], BLOCK, self.width)
+        self.cursor[i] = start
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        for i, rng in zip(idx, rngs, strict=True):
+            self.rngs[i] = rng
+            self._refill(i)
+        self._countdown = BLOCK - int((self.cursor - self.first_row).max())
+
+    def next(self) -> FloatArray:
+        values = self.rows[self.cursor]
+        self.cursor += 1
+        self._countdown -= 1
+        if self._countdown == 0:
+            for i in np.flatnonzero(self.cursor - self.first_row == BLOCK):
+                self._refill(i)
+            self._countdown = BLOCK - int((self.cursor - self.first_row).max())
+        return values
+
+
+def _uniform(rng: np.random.Generator, n: int, width: int) -> FloatArray:
+    return rng.random((n, width))
+
+
+class Bias(Stage):
+    """Constant additive bias per channel (channel units)."""
+
+    def __init__(self, bias: ArrayLike) -> None:
+        self.bias = np.asarray(bias, dtype=float)
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        z += self.bias
+        return z
+
+
+class GaussianNoise(Stage):
+    """Additive white Gaussian noise with standard deviation ``std`` per channel."""
+
+    def __init__(self, std: ArrayLike) -> None:
+        self.std = np.asarray(std, dtype=float)
+        if not np.all(np.isfinite(self.std) & (self.std >= 0)):
+            raise ValueError(f"noise std={self.std.tolist()} is invalid: must be finite and >= 0")
+        # noise is scaled as it is drawn, so a step costs one addition
+        self._draws = _RandomBlocks(lambda rng, n, width: rng.standard_normal((n, width))
+                                    * self.std, self.std.size)
+
+    def bind(self, batch_size: int) -> None:
+        self._draws.bind(batch_size)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        self._draws.reset(idx, rngs)
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        z += self._draws.next()
+        return z
+
+
+class WrapAngle(Stage):
+    """Wrap the selected channels to ``(-pi, pi]`` (a compass reads heading modulo a turn)."""
+
+    def __init__(self, mask: ArrayLike) -> None:
+        self.idx = _as_index(np.flatnonzero(np.asarray(mask, dtype=bool)))
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        angle = z[:, self.idx]
+        # pi - ((pi - a) mod 2 pi) lies in (-pi, pi]; in place on the (sliced) view
+        np.subtract(math.pi, angle, out=angle)
+        np.remainder(angle, 2 * math.pi, out=angle)
+        np.subtract(math.pi, angle, out=angle)
+        z[:, self.idx] = angle
+        return z
+
+
+def quantize(z: ArrayLike, mu: ArrayLike) -> FloatArray:
+    """Uniform quantizer ``mu * round(z / mu)``; its error is at most ``mu / 2`` per component."""
+    q = np.divide(z, mu)
+    np.rint(q, out=q)
+    q *= mu
+    return q
+
+
+class Quantizer(Stage):
+    """Static uniform quantizer ``mu*round(z/mu)`` on the channels whose step ``mu`` is not NaN."""
+
+    def __init__(self, step: ArrayLike) -> None:
+        step = np.asarray(step, dtype=float)
+        active = ~np.isnan(step)
+        if not np.all(step[active] > 0) or not np.all(np.isfinite(step[active])):
+            raise ValueError(f"quantization step={step.tolist()} is invalid: must be finite and "
+                             "> 0 (use None for an unquantized channel)")
+        self.idx, self.mu = _as_index(np.flatnonzero(active)), step[active]
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        z[:, self.idx] = quantize(z[:, self.idx], self.mu)
+        return z
+
+
+class ZoomingQuantizer(Stage):
+    """Dynamic ("zooming") uniform quantizer of seed 000, one zoom variable per channel group.
+
+    ``law="relative"`` (the seed's, MODELS.md 1.4): ``mu = 2 k ||z|| / sqrt(m)`` for a group of
+    ``m`` channels, so ``||q(z) - z|| <= k ||z||`` with ``0 < k < 1``: the quantizer zooms in as
+    the signal shrinks. ``mu`` must reach the receiver as side information.
+
+    ``law="zoom"`` (Brockett-Liberzon): piecewise-constant ``mu`` on ``2 levels + 1`` levels;
+    ``mu`` is multiplied by ``zoom_in`` (< 1) while the signal stays within ``margin`` of the range
+    and divided by it when the quantizer saturates. Error ``<= mu/2`` when not saturated.
+    """
+
+    def __init__(self, groups: Sequence[Sequence[int]], k: float = 0.6,
+                 law: Literal["relative", "zoom"] = "relative", mu0: float = 1.0,
+                 levels: int = 16, zoom_in: float = 0.8, margin: float = 0.5) -> None:
+        if not 0 < k < 1:
+            raise ValueError(f"k={k!r} is invalid: the zoom rate must be in (0, 1)")
+        if law not in ("relative", "zoom"):
+            raise ValueError(f"law={law!r} is invalid: 'relative' or 'zoom'")
+        if not (mu0 > 0 and levels >= 1 and 0 < zoom_in < 1 and 0 < margin < 1):
+            raise ValueError("zooming quantizer needs mu0 > 0, levels >= 1, 0 < zoom_in < 1 "
+                             f"and 0 < margin < 1 (got {mu0}, {levels}, {zoom_in}, {margin})")
+        self.groups = [np.asarray(g, dtype=np.intp) for g in groups]
+        self.k, self.law, self.mu0 = k, law, mu0
+        self.levels, self.zoom_in, self.margin = levels, zoom_in, margin
+
+    def bind(self, batch_size: int) -> None:
+        #: Current zoom variable per boat and group (the side information to transmit).
+        self.mu = np.full((batch_size, len(self.groups)), self.mu0)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        self.mu[idx] = self.mu0
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        for g, group in enumerate(self.groups):
+            zg = z[:, group]
+            if self.law == "relative":
+                norm = np.linalg.norm(zg, axis=1, keepdims=True)
+                mu = 2 * self.k * norm / math.sqrt(group.size)
+                self.mu[:, g] = mu[:, 0]
+                safe = np.where(mu > 1e-12 * (1 + norm), mu, 1.0)
+                z[:, group] = np.where(mu > 1e-12 * (1 + norm), quantize(zg, safe), 0.0)
+            else:
+                z[:, group] = self._zoom_step(zg, g)
+        return z
+
+    def _zoom_step(self, zg: FloatArray, g: int) -> FloatArray:
+        mu = self.mu[:, g:g + 1]
+        index = np.round(zg / mu)
+        saturated = np.abs(index).max(axis=1) > self.levels
+        q = mu * np.clip(index, -self.levels, self.levels)
+        inside = np.abs(zg).max(axis=1) <= self.margin * self.levels * mu[:, 0]
+        self.mu[:, g] = np.where(saturated, mu[:, 0] / self.zoom_in,
+                                 np.where(inside, mu[:, 0] * self.zoom_in, mu[:, 0]))
+        return q
+
+
+class Delay(Stage):
+    """Transport delay of a whole number of samples per channel (0 = none).
+
+    Right after a reset the delayed channels repeat the first measurement.
+    """
+
+    def __init__(self, samples: ArrayLike) -> None:
+        samples = np.asarray(samples)
+        if not (np.all(samples >= 0) and np.all(samples == np.round(samples))):
+            raise ValueError(f"delay={samples.tolist()} is invalid: whole samples >= 0 needed")
+        self.samples = samples.astype(np.intp)
+        self.length = int(self.samples.max()) + 1
+        self._channels = np.arange(self.samples.size)
+
+    def bind(self, batch_size: int) -> None:
+        self.buf = np.zeros((batch_size, self.length, self.samples.size))
+        self.head = 0
+        self.fresh = np.ones(batch_size, dtype=bool)
+        self._rows = np.arange(batch_size)[:, None]
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        self.fresh[idx] = True
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        self.head = (self.head + 1) % self.length
+        if self.fresh.any():
+            self.buf[self.fresh] = z[self.fresh, None, :]
+            self.fresh[:] = False
+        self.buf[:, self.head] = z
+        slots = (self.head - self.samples) % self.length
+        return self.buf[self._rows, slots[None, :], self._channels[None, :]]
+
+
+class Dropout(Stage):
+    """Each sample of a channel is lost with probability ``prob``; the last value is held.
+
+    After each call :attr:`valid` tells which channels carry a fresh sample (for estimators).
+    """
+
+    def __init__(self, prob: ArrayLike) -> None:
+        self.prob = np.asarray(prob, dtype=float)
+        if not np.all((self.prob >= 0) & (self.prob < 1)):
+            raise ValueError(f"dropout={self.prob.tolist()} is invalid: probabilities in [0, 1)")
+        self._draws = _RandomBlocks(_uniform, self.prob.size)
+
+    def bind(self, batch_size: int) -> None:
+        self._draws.bind(batch_size)
+        self.last = np.zeros((batch_size, self.prob.size))
+        self.fresh = np.ones(batch_size, dtype=bool)
+        self.valid = np.ones((batch_size, self.prob.size), dtype=bool)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        self._draws.reset(idx, rngs)
+        self.fresh[idx] = True
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        # The first sample of an episode always arrives: there is nothing to hold yet.
+        self.valid = (self._draws.next() >= self.prob) | self.fresh[:, None]
+        self.fresh[:] = False
+        self.last = np.where(self.valid, z, self.last)
+        return self.last
+
+
+class SensorSuite:
+    """A chain of sensor stages over named channels, batched over boats.
+
+    :param channels: names of the measured channels (model state names).
+    :param stages: the chain, applied in order.
+    """
+
+    def __init__(self, channels: Sequence[str], stages: Sequence[Stage]) -> None:
+        self.channels = tuple(channels)
+        self.stages = list(stages)
+        self._dropout = next((s for s in self.stages if isinstance(s, Dropout)), None)
+
+    @classmethod
+    def standard(cls, channels: Sequence[str], *, noise_std=None, bias=None, quantization=None,
+                 delay=None, dropout=None, wrap: Sequence[str] = (),
+                 quantizer: Literal["static", "zooming"] = "static",
+                 zoom_k: float = 0.6) -> SensorSuite:
+        """The usual chain from per-channel settings (scalars or ``{channel: value}``).
+
+        Stages whose settings are all zero/None are left out, so they cost nothing.
+        ``quantization`` gives the static step per channel (channel units); with
+        ``quantizer="zooming"`` it selects the channels quantized by the seed-000 zooming law.
+        """
+        stages: list[Stage] = []
+        b = per_channel("bias", bias, channels)
+        if np.any(b != 0):
+            stages.append(Bias(b))
+        std = per_channel("noise_std", noise_std, channels)
+        if np.any(std != 0):
+            stages.append(GaussianNoise(std))
+        unknown = sorted(set(wrap) - set(channels))
+        if unknown:
+            raise ValueError(f"wrap: unknown channel(s) {unknown}")
+        if wrap:
+            stages.append(WrapAngle([c in wrap for c in channels]))
+        mu = per_channel("quantization", quantization, channels, default=math.nan)
+        if not np.all(np.isnan(mu)):
+            if quantizer == "static":
+                stages.append(Quantizer(mu))
+            elif quantizer == "zooming":
+                stages.append(ZoomingQuantizer([[i] for i in np.flatnonzero(~np.isnan(mu))],
+                                               k=zoom_k))
+            else:
+                raise ValueError(f"quantizer={quantizer!r} is invalid: 'static' or 'zooming'")
+        lag = per_channel("delay", delay, channels)
+        if np.any(lag != 0):
+            stages.append(Delay(lag))
+        p = per_channel("dropout", dropout, channels)
+        if np.any(p != 0):
+            stages.append(Dropout(p))
+        return cls(channels, stages)
+
+    def bind(self, batch_size: int) -> None:
+        """Allocate state for ``batch_size`` boats."""
+        self._all_valid = np.ones((batch_size, len(self.channels)), dtype=bool)
+        for stage in self.stages:
+            stage.bind(batch_size)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        """Start new episodes for boats ``idx``, drawing from their generators ``rngs``."""
+        for stage in self.stages:
+            stage.reset(idx, rngs)
+
+    def measure(self, z: FloatArray) -> FloatArray:
+        """Measurements (batch x channels) of the true channel values ``z`` (overwritten)."""
+        for stage in self.stages:
+            z = stage(z)
+        return z
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """Which channels carried a fresh sample at the last :meth:`measure` (False = held)."""
+        return self._all_valid if self._dropout is None else self._dropout.valid
