@@ -14,17 +14,15 @@ streams that the same boats would consume one by one: a batched environment equa
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-FloatArray = NDArray[np.float64]
-Draw = Callable[[np.random.Generator, int, int], FloatArray]
+from .blocks import BLOCK, BlockStream
 
-#: Steps of random numbers drawn at a time from each boat's generator.
-BLOCK = 256
+FloatArray = NDArray[np.float64]
 
 
 def per_channel(name: str, value: float | Mapping[str, float] | None, channels: Sequence[str],
@@ -58,54 +56,34 @@ class Stage:
         raise NotImplementedError
 
 
-def _as_index(idx: NDArray[np.intp]) -> slice | NDArray[np.intp]:
+def as_index(idx: NDArray[np.intp]) -> slice | NDArray[np.intp]:
     """A slice when the indices are contiguous (basic indexing is much cheaper than fancy)."""
     if idx.size and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size)):
         return slice(int(idx[0]), int(idx[0]) + idx.size)
     return idx
 
 
-class _RandomBlocks:
-    """Per-boat random numbers, drawn ``BLOCK`` steps at a time from each boat's generator.
+class _RandomStage(Stage):
+    """A stage driven by per-boat random numbers, drawn a block at a time from each boat's
+    generator so that a boat's draws never depend on the other boats of the batch."""
 
-    Blocks of all boats lie in one (batch*BLOCK) x width array; ``cursor`` holds each boat's next
-    row, so a step is one gather and one increment.
-    """
+    def __init__(self, width: int) -> None:
+        self._stream = BlockStream(width, self._draw_blocks)
 
-    def __init__(self, draw: Draw, width: int) -> None:
-        self.draw, self.width = draw, width
+    def _draw(self, rng: np.random.Generator) -> FloatArray:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def _draw_blocks(self, idx: NDArray[np.intp]) -> FloatArray:
+        return np.stack([self._draw(self._rngs[i]) for i in idx])
 
     def bind(self, batch_size: int) -> None:
-        self.rows = np.zeros((batch_size * BLOCK, self.width))
-        self.first_row = np.arange(batch_size) * BLOCK
-        self.cursor = self.first_row.copy()
-        self.rngs: list[np.random.Generator | None] = [None] * batch_size
-        self._countdown = BLOCK  # steps until the first boat runs out
-
-    def _refill(self, i: int) -> None:
-        start = self.first_row[i]
-        self.rows[start:start + BLOCK] = self.draw(self.rngs[i], BLOCK, self.width)
-        self.cursor[i] = start
+        self._stream.bind(batch_size)
+        self._rngs: list[np.random.Generator] = [np.random.default_rng(0)] * batch_size
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         for i, rng in zip(idx, rngs, strict=True):
-            self.rngs[i] = rng
-            self._refill(i)
-        self._countdown = BLOCK - int((self.cursor - self.first_row).max())
-
-    def next(self) -> FloatArray:
-        values = self.rows[self.cursor]
-        self.cursor += 1
-        self._countdown -= 1
-        if self._countdown == 0:
-            for i in np.flatnonzero(self.cursor - self.first_row == BLOCK):
-                self._refill(i)
-            self._countdown = BLOCK - int((self.cursor - self.first_row).max())
-        return values
-
-
-def _uniform(rng: np.random.Generator, n: int, width: int) -> FloatArray:
-    return rng.random((n, width))
+            self._rngs[i] = rng
+        self._stream.restart(idx)
 
 
 class Bias(Stage):
@@ -119,25 +97,21 @@ class Bias(Stage):
         return z
 
 
-class GaussianNoise(Stage):
+class GaussianNoise(_RandomStage):
     """Additive white Gaussian noise with standard deviation ``std`` per channel."""
 
     def __init__(self, std: ArrayLike) -> None:
         self.std = np.asarray(std, dtype=float)
         if not np.all(np.isfinite(self.std) & (self.std >= 0)):
             raise ValueError(f"noise std={self.std.tolist()} is invalid: must be finite and >= 0")
-        # noise is scaled as it is drawn, so a step costs one addition
-        self._draws = _RandomBlocks(lambda rng, n, width: rng.standard_normal((n, width))
-                                    * self.std, self.std.size)
+        super().__init__(self.std.size)
 
-    def bind(self, batch_size: int) -> None:
-        self._draws.bind(batch_size)
-
-    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
-        self._draws.reset(idx, rngs)
+    def _draw(self, rng: np.random.Generator) -> FloatArray:
+        # scaled as drawn, so a step costs one addition
+        return rng.standard_normal((BLOCK, self.std.size)) * self.std
 
     def __call__(self, z: FloatArray) -> FloatArray:
-        z += self._draws.next()
+        z += self._stream.next()
         return z
 
 
@@ -145,24 +119,17 @@ class WrapAngle(Stage):
     """Wrap the selected channels to ``(-pi, pi]`` (a compass reads heading modulo a turn)."""
 
     def __init__(self, mask: ArrayLike) -> None:
-        self.idx = _as_index(np.flatnonzero(np.asarray(mask, dtype=bool)))
+        self.idx = as_index(np.flatnonzero(np.asarray(mask, dtype=bool)))
 
     def __call__(self, z: FloatArray) -> FloatArray:
-        angle = z[:, self.idx]
-        # pi - ((pi - a) mod 2 pi) lies in (-pi, pi]; in place on the (sliced) view
-        np.subtract(math.pi, angle, out=angle)
-        np.remainder(angle, 2 * math.pi, out=angle)
-        np.subtract(math.pi, angle, out=angle)
-        z[:, self.idx] = angle
+        # pi - ((pi - a) mod 2 pi) lies in (-pi, pi]
+        z[:, self.idx] = math.pi - (math.pi - z[:, self.idx]) % (2 * math.pi)
         return z
 
 
 def quantize(z: ArrayLike, mu: ArrayLike) -> FloatArray:
     """Uniform quantizer ``mu * round(z / mu)``; its error is at most ``mu / 2`` per component."""
-    q = np.divide(z, mu)
-    np.rint(q, out=q)
-    q *= mu
-    return q
+    return mu * np.rint(np.divide(z, mu))
 
 
 class Quantizer(Stage):
@@ -174,7 +141,8 @@ class Quantizer(Stage):
         if not np.all(step[active] > 0) or not np.all(np.isfinite(step[active])):
             raise ValueError(f"quantization step={step.tolist()} is invalid: must be finite and "
                              "> 0 (use None for an unquantized channel)")
-        self.idx, self.mu = _as_index(np.flatnonzero(active)), step[active]
+        # mu shaped (1, channels): equal-rank operands broadcast faster
+        self.idx, self.mu = as_index(np.flatnonzero(active)), step[active][None, :]
 
     def __call__(self, z: FloatArray) -> FloatArray:
         z[:, self.idx] = quantize(z[:, self.idx], self.mu)
@@ -271,7 +239,7 @@ class Delay(Stage):
         return self.buf[self._rows, slots[None, :], self._channels[None, :]]
 
 
-class Dropout(Stage):
+class Dropout(_RandomStage):
     """Each sample of a channel is lost with probability ``prob``; the last value is held.
 
     After each call :attr:`valid` tells which channels carry a fresh sample (for estimators).
@@ -281,21 +249,24 @@ class Dropout(Stage):
         self.prob = np.asarray(prob, dtype=float)
         if not np.all((self.prob >= 0) & (self.prob < 1)):
             raise ValueError(f"dropout={self.prob.tolist()} is invalid: probabilities in [0, 1)")
-        self._draws = _RandomBlocks(_uniform, self.prob.size)
+        super().__init__(self.prob.size)
+
+    def _draw(self, rng: np.random.Generator) -> FloatArray:
+        return rng.random((BLOCK, self.prob.size))
 
     def bind(self, batch_size: int) -> None:
-        self._draws.bind(batch_size)
+        super().bind(batch_size)
         self.last = np.zeros((batch_size, self.prob.size))
         self.fresh = np.ones(batch_size, dtype=bool)
         self.valid = np.ones((batch_size, self.prob.size), dtype=bool)
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
-        self._draws.reset(idx, rngs)
+        super().reset(idx, rngs)
         self.fresh[idx] = True
 
     def __call__(self, z: FloatArray) -> FloatArray:
         # The first sample of an episode always arrives: there is nothing to hold yet.
-        self.valid = (self._draws.next() >= self.prob) | self.fresh[:, None]
+        self.valid = (self._stream.next() >= self.prob) | self.fresh[:, None]
         self.fresh[:] = False
         self.last = np.where(self.valid, z, self.last)
         return self.last
@@ -356,6 +327,7 @@ class SensorSuite:
     def bind(self, batch_size: int) -> None:
         """Allocate state for ``batch_size`` boats."""
         self._all_valid = np.ones((batch_size, len(self.channels)), dtype=bool)
+        self._all_valid.flags.writeable = False
         for stage in self.stages:
             stage.bind(batch_size)
 

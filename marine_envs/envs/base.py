@@ -74,10 +74,11 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
         return obs, float(reward[0]), bool(failed[0]), False, self._info()
 
     def _info(self) -> dict[str, Any]:
+        # views, not copies: the simulator replaces these arrays every step, never writes them
         sim = self.sim
-        return {"state": sim.x[0].copy(), "action_applied": sim.u[0].copy(),
-                "action_clipped": bool(sim.clipped[0]), "disturbance": sim.d[0].copy(),
-                "measurement_mask": sim.sensors.valid[0].copy(), "time": sim.steps[0] * sim.dt}
+        return {"state": sim.x[0], "action_applied": sim.u[0],
+                "action_clipped": bool(sim.clipped[0]), "disturbance": sim.d[0],
+                "measurement_mask": sim.sensors.valid[0].copy(), "time": float(sim.steps[0]) * sim.dt}
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -164,11 +165,10 @@ class MarineVectorEnv(VectorEnv):
 
     def _info(self) -> dict[str, Any]:
         sim, m = self.sim, self._mask
-        return {"state": sim.x.copy(), "_state": m, "action_applied": sim.u.copy(),
-                "_action_applied": m, "action_clipped": sim.clipped.copy(), "_action_clipped": m,
-                "disturbance": sim.d.copy(), "_disturbance": m,
-                "measurement_mask": sim.sensors.valid.copy(), "_measurement_mask": m,
-                "time": sim.steps * sim.dt, "_time": m}
+        return {"state": sim.x, "_state": m, "action_applied": sim.u, "_action_applied": m,
+                "action_clipped": sim.clipped, "_action_clipped": m, "disturbance": sim.d,
+                "_disturbance": m, "measurement_mask": sim.sensors.valid,
+                "_measurement_mask": m, "time": sim.steps * sim.dt, "_time": m}
 
     def render(self):
         """Frames of every boat (a tuple of RGB arrays) in ``rgb_array`` mode."""

@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..models import VehicleModel
 from ..sea import WaveRealisation
-from ..sensors import SensorSuite, per_channel
+from ..sensors import SensorSuite, as_index, per_channel
 
 FloatArray = NDArray[np.float64]
 
@@ -128,10 +128,14 @@ class Simulator:
         self.dt, self.initial_state = dt, initial_state
         self.integrate = ExactLinear(model, dt) if integrator == "exact" else RK4(model, dt,
                                                                                  substeps)
-        self.measured = np.array([model.state_names.index(c) for c in sensors.channels])
+        self.measured = as_index(np.array([model.state_names.index(c) for c in sensors.channels]))
         self.u_low, self.u_high = model.u_bounds
-        self.u_scale = (self.u_high - self.u_low) / 2
-        self.u_mid = (self.u_high + self.u_low) / 2
+        # shaped (1, n_u): numpy broadcasts equal-rank operands faster
+        self.u_scale = ((self.u_high - self.u_low) / 2)[None, :]
+        self.u_mid = ((self.u_high + self.u_low) / 2)[None, :]
+        limited = np.flatnonzero(np.isfinite(task.limits))
+        self._limited = as_index(limited)
+        self._limits = task.limits[limited][None, :]
         n_d = len(model.disturbance_names)
         # the reward is a weighted sum of squares of the stacked [x u d] vector
         self._weights = -task.reward_scale * np.concatenate([task.q, task.r, np.zeros(n_d)])
@@ -145,7 +149,9 @@ class Simulator:
         self.u = np.tile(self.model.u0, (batch_size, 1))
         self.d = np.zeros((batch_size, len(self.model.disturbance_names)))
         self.clipped = self._never_clipped = np.zeros(batch_size, dtype=bool)
+        self._never_clipped.flags.writeable = False
         self.steps = np.zeros(batch_size, dtype=np.int64)
+        self._one = np.ones(1, dtype=np.int64)
         self.sensors.bind(batch_size)
         if self.waves is not None:
             self.waves.bind(batch_size)
@@ -154,9 +160,12 @@ class Simulator:
               x0: ArrayLike | None = None, wave_rngs: Sequence[np.random.Generator] | None = None
               ) -> None:
         """New episodes for boats ``idx``: initial state, wave phases, sensor state."""
+        # fresh arrays, never written in place: info dicts may hold views of the old ones
+        self.x, self.u, self.d = self.x.copy(), self.u.copy(), self.d.copy()
         for i, rng in zip(idx, rngs, strict=True):
             self.x[i] = self.initial_state(rng) if x0 is None else x0
-        self.u[idx], self.d[idx], self.clipped[idx], self.steps[idx] = self.model.u0, 0, False, 0
+        self.u[idx], self.d[idx], self.steps[idx] = self.model.u0, 0, 0
+        self.clipped = self._never_clipped
         if self.waves is not None:
             self.waves.reset(idx, rngs if wave_rngs is None else wave_rngs)
         self.sensors.reset(idx, rngs)
@@ -172,7 +181,8 @@ class Simulator:
             raise ValueError(f"action has shape {a.shape}; expected {self.u.shape[1]} value(s) "
                              f"per environment for {self.batch_size} environment(s)")
         a = a.reshape(self.u.shape)
-        peak = float(np.abs(a).max())
+        # numpy reductions have microseconds of overhead: small actions are checked in Python
+        peak = max(map(abs, a.ravel().tolist())) if a.size <= 64 else np.abs(a).max()
         if not math.isfinite(peak):
             raise ValueError(f"action contains NaN or inf: {a.tolist()!r}")
         if peak > 1.0:
@@ -193,9 +203,12 @@ class Simulator:
         error = xud if self._reference is None else xud - self._reference
         reward = (error * error) @ self._weights
         self.x = self.integrate(xud)
-        self.steps += 1
-        return reward, (np.abs(self.x) > self.task.limits).any(axis=1)
+        self.steps = self.steps + self._one
+        failed = np.logical_or.reduce(np.abs(self.x[:, self._limited]) > self._limits, axis=1)
+        return reward, failed
 
     def measure(self) -> FloatArray:
         """Sensor outputs (batch x channels) of the current states."""
-        return self.sensors.measure(self.x[:, self.measured])
+        true = self.x[:, self.measured]
+        # the sensor chain overwrites its input: never hand it a view of the state
+        return self.sensors.measure(true.copy() if true.base is self.x else true)

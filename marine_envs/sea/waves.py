@@ -1,15 +1,18 @@
 """Sea states and wave realisations that step cheaply and reproducibly.
 
-Choice of realisation: **random-phase superposition stepped by rotating phasors.** Each of N
-wave components is a complex phasor ``Z_j = exp(i(omega_e,j t + eps_j))``; a step multiplies it by
-the constant ``exp(i omega_e,j dt)`` and every disturbance channel is ``Re(sum_j Z_j G_jc)``, where
+Choice of realisation: **random-phase superposition evaluated with rotating phasors.** Each of N
+wave components is a complex phasor ``Z_j = exp(i(omega_e,j t + eps_j))``, advanced by the
+constant rotation ``exp(i omega_e,j dt)`` per step, and every disturbance channel is
+``Re(sum_j Z_j G_jc)``, where
 ``G_jc = a_j H_c(omega_j)`` carries the component amplitude ``a_j`` and the vessel's response
 ``H_c`` (see :mod:`marine_envs.sea.coupling`). Why this and not the alternatives:
 
 * unlike a fitted low-order shaping filter it reproduces *any* spectrum (PM, JONSWAP, a measured
   bimodal buoy spectrum) to the resolution of the frequency grid, with no fitting step;
-* unlike evaluating ``cos(omega t + eps)`` it costs one complex multiply per component per step,
-  and unlike a pre-computed FFT block it has no episode-length limit or per-episode synthesis cost;
+* it has no episode-length limit and no periodicity (unlike an inverse-FFT record), and it is
+  cheap: the disturbance of 256 steps of many boats is one real matrix product of precomputed
+  ``cos/sin(omega_e t)`` with the boats' phasor weights (:mod:`marine_envs.blocks`), after which
+  the phasors jump a block ahead by one complex multiply;
 * it is exact at the moving vessel: the phase advances at the (signed) encounter frequency while
   the amplitude and the vessel response use the absolute wave frequency, so following seas fold
   correctly without binning;
@@ -37,6 +40,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..blocks import BLOCK, BlockStream
 from .spectra import MeasuredSpectrum, jonswap, pierson_moskowitz
 
 G = 9.81  #: gravity, m/s^2
@@ -219,9 +223,14 @@ class WaveRealisation:
         self.omega = np.interp(edges[:-1] + jitter * np.diff(edges), fraction, grid)
         self._grid, self._edges = grid, np.interp(edges, fraction, grid)
         self.omega_e = self.omega - self.omega**2 * speed * math.cos(heading) / G
-        self._rotation = np.exp(1j * self.omega_e * dt)
+        # phasor rotations over the steps of a block, and over a whole block
+        self._step_times = np.arange(BLOCK) * dt
+        self._rotations = np.exp(1j * np.outer(self._step_times, self.omega_e))  # (BLOCK, n)
+        self._cos_sin = np.hstack([self._rotations.real, self._rotations.imag])
+        self._block_rotation = np.exp(1j * self.omega_e * BLOCK * dt)
+        self._stream = BlockStream(0, self._blocks)
         response = np.asarray(coupling(self.omega), dtype=complex)
-        self.n_channels = response.shape[1]
+        self.n_channels = self._stream.width = response.shape[1]
         self._hs_grid: NDArray[np.float64] | None = None
         if sea.varying and sea.shape_follows_hs:
             # amplitudes tabulated over Hs (2 % steps) and interpolated in between
@@ -241,32 +250,50 @@ class WaveRealisation:
 
     # -- batched state ---------------------------------------------------------------------------
     def bind(self, batch_size: int) -> None:
-        """Allocate phasors for ``batch_size`` boats."""
+        """Allocate state for ``batch_size`` boats."""
+        #: each boat's phasors exp(i(omega_e t + eps)) and time t (s) at the start of its next block
         self.phasor = np.ones((batch_size, self.omega.size), dtype=complex)
-        self.time = np.zeros(batch_size)
+        self.block_time = np.zeros(batch_size)
+        self._stream.bind(batch_size)
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         """New random phases for boats ``idx`` from their generators; their time restarts at 0."""
         for i, rng in zip(idx, rngs, strict=True):
             self.phasor[i] = np.exp(1j * rng.uniform(0.0, 2 * math.pi, self.omega.size))
-        self.time[idx] = 0.0
+        self.block_time[idx] = 0.0
+        self._stream.restart(idx)
 
     def step(self) -> NDArray[np.float64]:
         """Disturbance (batch x channels) at the current time; then advance by ``dt``."""
-        if self._hs_grid is not None:
-            hs = self.sea.hs(self.time)  # type: ignore[operator]
-            pos = np.interp(hs, self._hs_grid, np.arange(self._hs_grid.size))
-            k = np.minimum(pos.astype(np.intp), self._hs_grid.size - 2)
-            w = (pos - k)[:, None, None]
-            gain = (1 - w) * self._gain_table[k] + w * self._gain_table[k + 1]
-            value = np.einsum("bn,bnc->bc", self.phasor, gain).real
-        else:
-            value = (self.phasor @ self._gain).real
+        return self._stream.next()
+
+    def _blocks(self, idx: NDArray[np.intp]) -> NDArray[np.float64]:
+        """The next ``BLOCK`` steps of boats ``idx`` (boats x BLOCK x channels)."""
+        k, n, c = idx.size, self.omega.size, self.n_channels
+        times = self.block_time[idx, None] + self._step_times  # (k, BLOCK)
+        if self._hs_grid is None:
+            # Re(sum_j Z_j(t) G_jc) for all steps at once: one real matrix product
+            weights = self.phasor[idx, :, None] * self._gain  # (k, n, c)
+            stacked = np.concatenate([weights.real, -weights.imag], axis=1)  # (k, 2n, c)
+            values = self._cos_sin @ stacked.transpose(1, 0, 2).reshape(2 * n, k * c)
+            values = values.reshape(BLOCK, k, c).transpose(1, 0, 2)
             if self.sea.varying:
-                value *= self.sea.hs(self.time)[:, None]  # type: ignore[operator]
-        self.phasor *= self._rotation
-        self.time += self.dt
-        return value
+                values = values * self.sea.hs(times)[:, :, None]  # type: ignore[operator]
+        else:
+            values = np.stack([self._shaped_block(i, t) for i, t in zip(idx, times, strict=True)])
+        self.phasor[idx] *= self._block_rotation
+        self.block_time[idx] += BLOCK * self.dt
+        return values
+
+    def _shaped_block(self, i: int, times: NDArray[np.float64]) -> NDArray[np.float64]:
+        """One boat's block when the spectral shape follows a time-varying Hs."""
+        hs = self.sea.hs(times)  # type: ignore[operator]
+        pos = np.interp(hs, self._hs_grid, np.arange(self._hs_grid.size))
+        j = np.minimum(pos.astype(np.intp), self._hs_grid.size - 2)
+        w = (pos - j)[:, None, None]
+        gain = (1 - w) * self._gain_table[j] + w * self._gain_table[j + 1]  # (BLOCK, n, c)
+        phasors = self.phasor[i] * self._rotations  # (BLOCK, n)
+        return np.einsum("kn,knc->kc", phasors, gain).real
 
     def sample(self, n_steps: int, rng: np.random.Generator) -> NDArray[np.float64]:
         """One boat's realisation over ``n_steps`` steps (n_steps x channels), for analysis."""

@@ -1,0 +1,59 @@
+"""Exogenous signals (waves, sensor noise) produced in blocks of steps, per boat.
+
+A step of an environment then costs one gather per signal instead of a few array operations,
+and the signals of many boats are produced together. Each boat has its own cursor: boats reset
+at different times (vector environments) still see their signal from its start, so a boat's
+signal never depends on what the other boats of the batch do.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+
+#: Steps per block.
+BLOCK = 256
+
+Fill = Callable[[NDArray[np.intp]], NDArray[np.float64]]
+
+
+class BlockStream:
+    """Rows of a per-boat signal, refilled ``BLOCK`` steps at a time.
+
+    :param width: values per step and boat.
+    :param fill: given boat indices ``idx``, returns their next blocks, shape
+        ``(len(idx), BLOCK, width)``; it is called at reset and whenever a block is used up.
+    """
+
+    def __init__(self, width: int, fill: Fill) -> None:
+        self.width, self.fill = width, fill
+
+    def bind(self, batch_size: int) -> None:
+        """Allocate blocks for ``batch_size`` boats."""
+        self.blocks = np.zeros((batch_size, BLOCK, self.width))
+        self.rows = self.blocks.reshape(batch_size * BLOCK, self.width)  # a view
+        self.first_row = np.arange(batch_size) * BLOCK
+        self.cursor = self.first_row.copy()
+        self._one = np.ones(1, dtype=self.cursor.dtype)
+        self._countdown = BLOCK  # steps until the first boat runs out
+
+    def restart(self, idx: NDArray[np.intp]) -> None:
+        """Refill boats ``idx`` from their signal's current state (call at episode start)."""
+        self._refill(idx)
+
+    def next(self) -> NDArray[np.float64]:
+        """The current row of every boat (batch x width); then advance."""
+        values = self.rows.take(self.cursor, axis=0)
+        self.cursor = self.cursor + self._one  # (array operands: cheaper than += 1 in numpy 2)
+        self._countdown -= 1
+        if self._countdown == 0:
+            self._refill(np.flatnonzero(self.cursor - self.first_row == BLOCK))
+        return values
+
+    def _refill(self, idx: NDArray[np.intp]) -> None:
+        if idx.size:
+            self.blocks[idx] = self.fill(idx)
+            self.cursor[idx] = self.first_row[idx]
+        self._countdown = BLOCK - int((self.cursor - self.first_row).max())
