@@ -3,7 +3,8 @@
 A :class:`SensorSuite` maps true channel values ``z`` (batch x channels, SI units) to measurements
 through a chain of small stages, each configured per channel and vectorised over the batch::
 
-    bias -> Gaussian noise -> angle wrapping -> quantizer -> delay -> dropout (hold last value)
+    bias -> Gaussian noise -> angle wrapping -> quantizer -> saturation -> delay
+    -> dropout (hold last value)
 
 Every stage works on a batch of independent sensor suites (one per boat of a vector environment).
 Randomness comes from each boat's own ``np.random.Generator`` (handed down from
@@ -206,6 +207,19 @@ class ZoomingQuantizer(Stage):
         return q
 
 
+class Saturation(Stage):
+    """Full-scale range of each channel: outputs are clamped to ``[-limit, limit]``."""
+
+    def __init__(self, limit: ArrayLike) -> None:
+        limit = np.asarray(limit, dtype=float)
+        if not np.all(limit > 0):
+            raise ValueError(f"range={limit.tolist()} is invalid: full scales must be > 0")
+        self.high, self.low = limit[None, :], -limit[None, :]
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        return np.minimum(np.maximum(z, self.low), self.high)
+
+
 class Delay(Stage):
     """Transport delay of a whole number of samples per channel (0 = none).
 
@@ -286,13 +300,14 @@ class SensorSuite:
 
     @classmethod
     def standard(cls, channels: Sequence[str], *, noise_std=None, bias=None, quantization=None,
-                 delay=None, dropout=None, wrap: Sequence[str] = (),
+                 sensor_range=None, delay=None, dropout=None, wrap: Sequence[str] = (),
                  quantizer: Literal["static", "zooming"] = "static",
                  zoom_k: float = 0.6) -> SensorSuite:
         """The usual chain from per-channel settings (scalars or ``{channel: value}``).
 
         Stages whose settings are all zero/None are left out, so they cost nothing.
-        ``quantization`` gives the static step per channel (channel units); with
+        ``quantization`` gives the static step per channel (channel units), ``sensor_range`` the
+        full scale (outputs clamped to +-range; wrapped angles need none); with
         ``quantizer="zooming"`` it selects the channels quantized by the seed-000 zooming law.
         """
         stages: list[Stage] = []
@@ -316,6 +331,9 @@ class SensorSuite:
                                                k=zoom_k))
             else:
                 raise ValueError(f"quantizer={quantizer!r} is invalid: 'static' or 'zooming'")
+        full_scale = per_channel("sensor_range", sensor_range, channels, default=math.inf)
+        if np.isfinite(full_scale).any():
+            stages.append(Saturation(full_scale))
         lag = per_channel("delay", delay, channels)
         if np.any(lag != 0):
             stages.append(Delay(lag))
@@ -341,6 +359,23 @@ class SensorSuite:
         for stage in self.stages:
             z = stage(z)
         return z
+
+    @property
+    def output_range(self) -> FloatArray:
+        """Largest possible magnitude of each channel's output (inf where unbounded)."""
+        bound = np.full(len(self.channels), math.inf)
+        for stage in self.stages:
+            if isinstance(stage, WrapAngle):
+                bound[stage.idx] = math.pi
+            elif isinstance(stage, Quantizer):
+                bound[stage.idx] += stage.mu[0] / 2  # rounding may step past the bound
+            elif isinstance(stage, ZoomingQuantizer):
+                bound *= 1 + stage.k
+            elif isinstance(stage, Saturation):
+                bound = np.minimum(bound, stage.high[0])
+            elif isinstance(stage, Bias | GaussianNoise):
+                bound[:] = math.inf
+        return bound
 
     @property
     def valid(self) -> NDArray[np.bool_]:

@@ -23,11 +23,10 @@ from .core import Simulator
 _ONE = np.array([0])
 
 
-def _spaces(sim: Simulator, wrapped: tuple[str, ...]) -> tuple[spaces.Box, spaces.Box]:
+def _spaces(sim: Simulator) -> tuple[spaces.Box, spaces.Box]:
     n_u = len(sim.model.input_names)
     action = spaces.Box(-1.0, 1.0, (n_u,), dtype=np.float32)
-    high = np.array([np.pi if c in wrapped else np.inf for c in sim.sensors.channels],
-                    dtype=np.float32)
+    high = sim.sensors.output_range.astype(np.float32)
     return action, spaces.Box(-high, high, dtype=np.float32)
 
 
@@ -41,13 +40,13 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
-    def __init__(self, sim: Simulator, wrapped: tuple[str, ...] = (),
-                 render_mode: str | None = None, wave_seed: int | None = None) -> None:
+    def __init__(self, sim: Simulator, render_mode: str | None = None,
+                 wave_seed: int | None = None) -> None:
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode={render_mode!r} is invalid: None or 'rgb_array'")
         self.sim, self.render_mode, self.wave_seed = sim, render_mode, wave_seed
         self.metadata = {**self.metadata, "render_fps": round(1 / sim.dt)}
-        self.action_space, self.observation_space = _spaces(sim, wrapped)
+        self.action_space, self.observation_space = _spaces(sim)
         self.dt = sim.dt
         sim.bind(1)
         self._renderer = None
@@ -108,8 +107,7 @@ class MarineVectorEnv(VectorEnv):
                                           "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, sim: Simulator, num_envs: int, max_episode_steps: int | None,
-                 wrapped: tuple[str, ...] = (), render_mode: str | None = None,
-                 wave_seed: int | None = None) -> None:
+                 render_mode: str | None = None, wave_seed: int | None = None) -> None:
         if not (isinstance(num_envs, int | np.integer) and num_envs >= 1):
             raise ValueError(f"num_envs={num_envs!r} is invalid: an integer >= 1")
         if max_episode_steps is not None and max_episode_steps < 1:
@@ -118,7 +116,7 @@ class MarineVectorEnv(VectorEnv):
             raise ValueError(f"render_mode={render_mode!r} is invalid: None or 'rgb_array'")
         self.sim, self.num_envs, self.max_episode_steps = sim, int(num_envs), max_episode_steps
         self.render_mode, self.wave_seed, self.dt = render_mode, wave_seed, sim.dt
-        self.single_action_space, self.single_observation_space = _spaces(sim, wrapped)
+        self.single_action_space, self.single_observation_space = _spaces(sim)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         sim.bind(self.num_envs)

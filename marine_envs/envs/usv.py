@@ -18,6 +18,8 @@ DEG = math.pi / 180
 #: Sensor defaults per measured channel (SI): noise standard deviation and quantization step.
 DEFAULT_NOISE = {"r": 0.1 * DEG, "psi": 0.2 * DEG, "p": 0.1 * DEG, "phi": 0.1 * DEG}
 DEFAULT_QUANTIZATION = {"r": 0.05 * DEG, "psi": 0.1 * DEG, "p": 0.05 * DEG, "phi": 0.1 * DEG}
+#: Full scale of the rate gyros (90 deg/s) and the roll inclinometer (90 deg); heading wraps.
+DEFAULT_RANGE = {"r": math.pi / 2, "p": math.pi / 2, "phi": math.pi / 2}
 #: Bryson's rule: weight = 1 / (acceptable size)^2 -> heading 3 deg, roll 2 deg, rudder 10 deg.
 DEFAULT_STATE_WEIGHTS = {"psi": 1 / (3 * DEG) ** 2, "phi": 1 / (2 * DEG) ** 2}
 DEFAULT_INPUT_WEIGHTS = {"delta": 1 / (10 * DEG) ** 2}
@@ -38,6 +40,7 @@ def make_usv_simulator(
     coupling: Mapping[str, float] | None = None,
     noise_std: float | Mapping[str, float] | None = None,
     quantization: float | Mapping[str, float] | None = None,
+    sensor_range: Mapping[str, float] | None = None,
     quantizer: Literal["static", "zooming"] = "static",
     zoom_k: float = 0.6,
     bias: float | Mapping[str, float] | None = None,
@@ -55,7 +58,7 @@ def make_usv_simulator(
         channels, noise_std=DEFAULT_NOISE if noise_std is None else noise_std,
         quantization=DEFAULT_QUANTIZATION if quantization is None else quantization,
         quantizer=quantizer, zoom_k=zoom_k, bias=bias, delay=delay, dropout=dropout,
-        wrap=("psi",))
+        sensor_range=DEFAULT_RANGE if sensor_range is None else sensor_range, wrap=("psi",))
     if not (math.isfinite(max_roll) and max_roll > 0):
         raise ValueError(f"max_roll={max_roll!r} is invalid: must be > 0 rad")
     task = make_task(model, DEFAULT_STATE_WEIGHTS if state_weights is None else state_weights,
@@ -90,8 +93,8 @@ class USVEnv(MarineEnv):
 
     ## Observation Space
     ``Box((4,), float32)``: the seed's measured channels ``[r, psi, p, phi]`` (rad/s, rad,
-    rad/s, rad) after bias, Gaussian noise, heading wrapping to (-pi, pi], quantization, delay and
-    dropout, as configured. Default noise std 0.1 deg/s, 0.2 deg, 0.1 deg/s, 0.1 deg; default
+    rad/s, rad) after bias, Gaussian noise, heading wrapping to (-pi, pi], quantization, sensor
+    full scale (90 deg/s gyros, 90 deg inclinometer), delay and dropout, as configured. Default noise std 0.1 deg/s, 0.2 deg, 0.1 deg/s, 0.1 deg; default
     quantization steps 0.05 deg/s, 0.1 deg, 0.05 deg/s, 0.1 deg.
 
     ## Rewards
@@ -122,7 +125,8 @@ class USVEnv(MarineEnv):
       ``speed``: ship speed for the encounter frequency, m/s (7.7 = 15 kn);
       ``n_wave_components`` (64); ``waves`` (True; False = calm water);
       ``coupling``: options of :class:`~marine_envs.sea.USVWaveCoupling`.
-    * ``noise_std``, ``bias``, ``quantization``, ``delay`` (samples), ``dropout`` (probability):
+    * ``noise_std``, ``bias``, ``quantization``, ``sensor_range`` (full scale), ``delay``
+      (samples), ``dropout`` (probability):
       a number for every channel or ``{channel: value}``, SI units; ``quantizer``: "static" or
       "zooming" (seed 000's relative law, rate ``zoom_k``).
     * ``initial_spread``: ``{state: half-width}`` of the uniform initial state.
@@ -134,7 +138,7 @@ class USVEnv(MarineEnv):
 
     def __init__(self, render_mode: str | None = None, wave_seed: int | None = None,
                  **kwargs: Any) -> None:
-        super().__init__(make_usv_simulator(**kwargs), wrapped=("psi",), render_mode=render_mode,
+        super().__init__(make_usv_simulator(**kwargs), render_mode=render_mode,
                          wave_seed=wave_seed)
 
     def _make_renderer(self):
@@ -150,7 +154,7 @@ class USVVectorEnv(MarineVectorEnv):
                  render_mode: str | None = None, wave_seed: int | None = None,
                  **kwargs: Any) -> None:
         super().__init__(make_usv_simulator(**kwargs), num_envs, max_episode_steps,
-                         wrapped=("psi",), render_mode=render_mode, wave_seed=wave_seed)
+                         render_mode=render_mode, wave_seed=wave_seed)
 
     def _make_renderer(self):
         from .rendering import USVRenderer

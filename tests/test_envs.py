@@ -1,0 +1,241 @@
+"""USV-v0 and its native vector twin: API conformance, equality, reproducibility, bad input."""
+
+import math
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from gymnasium.vector import SyncVectorEnv
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+import marine_envs  # noqa: F401
+from marine_envs.envs import USVEnv
+from marine_envs.envs.core import RK4
+from marine_envs.envs.usv import make_usv_simulator
+
+ENV_ID = "marine_envs/USV-v0"
+# settings that exercise every random and stateful sensor stage
+BUSY_SENSORS = {"dropout": {"psi": 0.2, "phi": 0.1}, "delay": {"r": 2}, "bias": {"p": 0.001}}
+
+
+def run(env, actions, seed):
+    """(observations, rewards, terminated, truncated, true states) of an episode, as arrays;
+    observations and states include the reset."""
+    obs, info = env.reset(seed=seed)
+    observations, states, steps = [obs], [info["state"].copy()], []
+    for action in actions:
+        obs, reward, terminated, truncated, info = env.step(action)
+        observations.append(obs)
+        states.append(info["state"].copy())
+        steps.append((reward, terminated, truncated))
+    rewards, terminated, truncated = (np.array(c) for c in zip(*steps, strict=True))
+    return np.array(observations), rewards, terminated, truncated, np.array(states)
+
+
+def test_gymnasium_and_sb3_env_checkers_pass():
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the checkers report problems as warnings
+        check_env(gym.make(ENV_ID, render_mode="rgb_array").unwrapped, skip_render_check=False)
+        check_env(gym.make(ENV_ID, **BUSY_SENSORS).unwrapped)
+    sb3_check_env(USVEnv(**BUSY_SENSORS), warn=True)
+
+
+def test_vector_twin_steps_exactly_like_single_envs():
+    n, steps, horizon = 4, 300, 120  # two auto-resets and a refill of the 256-step blocks
+    rng = np.random.default_rng(7)
+    actions = rng.uniform(-1.3, 1.3, size=(steps, n, 1)).astype(np.float32)
+    vector = gym.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point",
+                          max_episode_steps=horizon, **BUSY_SENSORS)
+    singles = SyncVectorEnv([lambda: gym.make(ENV_ID, max_episode_steps=horizon, **BUSY_SENSORS)
+                             for _ in range(n)])
+    obs_v, rew_v, term_v, trunc_v, state_v = run(vector, actions, seed=11)
+    obs_s, rew_s, term_s, trunc_s, state_s = run(singles, actions, seed=11)
+    assert trunc_v.sum() == 2 * n  # the comparison crossed episode boundaries
+    np.testing.assert_array_equal(trunc_v, trunc_s)
+    np.testing.assert_array_equal(term_v, term_s)
+    np.testing.assert_allclose(state_v, state_s, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(obs_v, obs_s, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(rew_v, rew_s, rtol=1e-9, atol=1e-9)
+
+
+def test_same_seed_same_episode_different_seed_different_waves():
+    actions = np.zeros((200, 1), dtype=np.float32)
+    first = run(gym.make(ENV_ID), actions, seed=3)
+    again = run(gym.make(ENV_ID), actions, seed=3)
+    other = run(gym.make(ENV_ID), actions, seed=4)
+    for a, b in zip(first, again, strict=True):
+        np.testing.assert_array_equal(a, b)
+    env = gym.make(ENV_ID)
+    disturbances = []
+    for seed in (3, 4):
+        env.reset(seed=seed)
+        disturbances.append([env.step(actions[0])[4]["disturbance"].copy() for _ in range(50)])
+    assert not np.allclose(disturbances[0], disturbances[1])
+    assert not np.allclose(first[4], other[4])
+
+
+def test_wave_seed_freezes_the_sea_but_not_the_noise():
+    env = gym.make(ENV_ID, wave_seed=5, initial_spread={})
+    records = []
+    for seed in (1, 2):
+        obs, _ = env.reset(seed=seed)
+        steps = [env.step(np.zeros(1, dtype=np.float32)) for _ in range(30)]
+        records.append((np.array([s[4]["disturbance"] for s in steps]),
+                        np.array([s[0] for s in steps])))
+    np.testing.assert_array_equal(records[0][0], records[1][0])
+    assert not np.array_equal(records[0][1], records[1][1])
+
+
+def test_observation_is_the_sensor_output_not_the_state():
+    env = gym.make(ENV_ID)
+    obs, info = env.reset(seed=0)
+    true = info["state"][[1, 2, 3, 4]]
+    assert not np.allclose(obs, true, atol=1e-9)  # noise and quantization
+    assert np.allclose(obs, true, atol=np.radians(1.5))  # ... but small
+    ideal = gym.make(ENV_ID, noise_std=0.0, quantization={}, waves=False)
+    obs, info = ideal.reset(seed=0)
+    np.testing.assert_allclose(obs, info["state"][[1, 2, 3, 4]].astype(np.float32))
+
+
+def test_quantization_step_shows_in_the_observation():
+    mu = np.radians(0.5)
+    env = gym.make(ENV_ID, quantization={"psi": mu, "phi": mu}, noise_std=0.0)
+    env.reset(seed=0)
+    for _ in range(20):
+        obs = env.step(np.array([0.3], dtype=np.float32))[0]
+        for value in obs[[1, 3]]:
+            assert abs(value / mu - round(value / mu)) < 1e-4
+
+
+def test_reward_is_minus_the_lqr_stage_cost_of_state_and_input():
+    env = gym.make(ENV_ID)
+    sim = env.unwrapped.sim
+    _, info = env.reset(seed=2)
+    for action in (0.5, -0.2, 1.0):
+        x = info["state"].copy()
+        _, reward, _, _, info = env.step(np.array([action], dtype=np.float32))
+        u = info["action_applied"]
+        assert reward == pytest.approx(-(x @ (sim.task.q * x) + u @ (sim.task.r * u)), rel=1e-12)
+        assert u[0] == pytest.approx(action * math.radians(35))
+
+
+def test_nan_or_inf_action_raises_and_loses_nothing():
+    env = gym.make(ENV_ID)
+    env.reset(seed=0)
+    env.step(np.array([0.1], dtype=np.float32))
+    sim = env.unwrapped.sim
+    before = sim.x.copy(), sim.u.copy(), sim.steps.copy()
+    for bad in (np.nan, np.inf, -np.inf):
+        with pytest.raises(ValueError, match="action"):
+            env.step(np.array([bad], dtype=np.float32))
+    np.testing.assert_array_equal(sim.x, before[0])
+    np.testing.assert_array_equal(sim.u, before[1])
+    np.testing.assert_array_equal(sim.steps, before[2])
+    with pytest.raises(ValueError, match="action has shape"):
+        env.step(np.zeros(3, dtype=np.float32))
+    env.step(np.array([0.1], dtype=np.float32))  # still usable
+
+
+def test_out_of_range_action_is_clipped_and_reported():
+    env = gym.make(ENV_ID)
+    env.reset(seed=0)
+    info = env.step(np.array([3.0], dtype=np.float32))[4]
+    assert info["action_clipped"] and info["action_applied"][0] == pytest.approx(math.radians(35))
+    info = env.step(np.array([-0.5], dtype=np.float32))[4]
+    assert not info["action_clipped"]
+    vector = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point")
+    vector.reset(seed=0)
+    info = vector.step(np.array([[0.2], [-7.0], [1.0]], dtype=np.float32))[4]
+    np.testing.assert_array_equal(info["action_clipped"], [False, True, False])
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"hs": -1.0}, "hs"), ({"hs": float("nan")}, "hs"), ({"tp": 0.0}, "tp"),
+    ({"quantization": 0.0}, "quantization"), ({"quantization": {"psi": -0.1}}, "quantization"),
+    ({"noise_std": {"yaw": 0.1}}, "noise_std.*yaw"), ({"dropout": {"phi": 1.5}}, "dropout"),
+    ({"delay": {"r": 0.5}}, "delay"), ({"dt": 0.0}, "dt"), ({"params": {"wn": -1}}, "wn"),
+    ({"params": {"Kxx": 1}}, "Kxx"), ({"spectrum": "bretschneider"}, "spectrum"),
+    ({"n_wave_components": 0}, "n_components"), ({"speed": -1.0}, "speed"),
+    ({"max_roll": 0.0}, "max_roll"), ({"render_mode": "human"}, "render_mode"),
+    ({"state_weights": {"psi": -1.0}}, "state_weights"),
+])
+def test_invalid_constructor_arguments_name_the_argument(kwargs, name):
+    with pytest.raises(ValueError, match=name):
+        USVEnv(**kwargs)
+
+
+def test_capsize_terminates_and_reset_option_sets_the_state():
+    env = gym.make(ENV_ID, max_roll=math.radians(20))
+    x0 = np.array([0.0, 0.0, 0.1, 0.0, math.radians(25)])
+    _, info = env.reset(seed=0, options={"state": x0})
+    np.testing.assert_array_equal(info["state"], x0)
+    assert env.step(np.zeros(1, dtype=np.float32))[2]  # terminated
+    with pytest.raises(ValueError, match="options\\['state'\\]"):
+        env.reset(options={"state": [0.0, 1.0]})
+    with pytest.raises(ValueError, match="unknown reset option"):
+        env.reset(options={"heading": 1.0})
+
+
+def test_vector_env_autoresets_on_the_next_step():
+    vector = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point",
+                          max_episode_steps=5)
+    vector.reset(seed=0)
+    zeros = np.zeros((2, 1), dtype=np.float32)
+    for _ in range(4):
+        assert not vector.step(zeros)[3].any()
+    assert vector.step(zeros)[3].all()  # truncated
+    obs, reward, terminated, truncated, info = vector.step(zeros)
+    np.testing.assert_array_equal(reward, 0.0)
+    assert not truncated.any() and not terminated.any()
+    np.testing.assert_array_equal(info["time"], 0.0)
+
+
+def test_exact_and_rk4_integration_agree():
+    settings = {"hs": 2.0}
+    exact, rk4 = make_usv_simulator(**settings), make_usv_simulator(**settings)
+    rk4.integrate = RK4(rk4.model, rk4.dt, substeps=8)
+    for sim in (exact, rk4):
+        sim.bind(2)
+        sim.reset(np.arange(2), [np.random.default_rng(i) for i in range(2)])
+    for k in range(300):
+        action = np.full((2, 1), 0.5 * math.sin(0.05 * k))
+        for sim in (exact, rk4):
+            sim.apply(action)
+            sim.advance()
+    np.testing.assert_allclose(rk4.x, exact.x, atol=1e-6)
+
+
+def test_long_batched_run_stays_finite_and_bounded():
+    vector = gym.make_vec(ENV_ID, num_envs=16, vectorization_mode="vector_entry_point",
+                          max_episode_steps=None, hs=4.0, dropout=0.1)
+    obs, _ = vector.reset(seed=1)
+    rng = np.random.default_rng(1)
+    for _ in range(5000):  # 500 s of sea, 20 blocks
+        obs, reward, terminated, _, info = vector.step(rng.uniform(-1, 1, (16, 1)))
+        assert np.isfinite(obs).all() and np.isfinite(reward).all()
+    assert np.isfinite(info["state"]).all()
+
+
+def test_schedule_and_jonswap_seas_run():
+    env = gym.make(ENV_ID, hs=[(0.0, 1.0), (20.0, 3.0)], spectrum="jonswap", tp=9.0)
+    env.reset(seed=0)
+    d = np.array([env.step(np.zeros(1, dtype=np.float32))[4]["disturbance"]
+                  for _ in range(400)])
+    assert np.abs(d[300:]).std() > 2 * np.abs(d[:100]).std()  # the sea builds up
+
+
+def test_render_draws_heading_roll_and_rudder():
+    env = gym.make(ENV_ID, render_mode="rgb_array")
+    env.reset(seed=0, options={"state": np.zeros(5)})
+    calm = env.render()
+    env.reset(seed=0, options={"state": np.array([0, 0, 1.0, 0, 0.3])})
+    env.step(np.array([1.0], dtype=np.float32))
+    turned = env.render()
+    assert calm.shape == turned.shape and calm.ndim == 3 and calm.dtype == np.uint8
+    assert (calm != turned).any(axis=2).mean() > 0.01
+    frames = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point",
+                          render_mode="rgb_array")
+    frames.reset(seed=0)
+    assert len(frames.render()) == 2
