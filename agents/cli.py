@@ -33,10 +33,11 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from marine_envs.recording import write_recording
+    from marine_envs.recording import check_suffix, write_recording
 
     from .simulate import simulate
 
+    check_suffix(args.out)
     env_kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
     options = {k: v for k, v in (("amplitude", args.amplitude), ("period", args.period),
                                  ("hold", args.hold)) if v is not None}

@@ -44,9 +44,15 @@ class BlockStream:
         self._refill(idx)
 
     def next(self) -> NDArray[np.float64]:
-        """The current row of every boat (batch x width); then advance."""
-        values = self.rows.take(self.cursor, axis=0)
-        self.cursor = self.cursor + self._one  # (array operands: cheaper than += 1 in numpy 2)
+        """The current row of every boat (batch x width, a new array); then advance."""
+        if self.rows.shape[0] == BLOCK:
+            # a batch of one (single environments): basic slicing beats index arrays
+            row = int(self.cursor[0])
+            values = self.rows[row:row + 1].copy()
+            self.cursor[0] = row + 1
+        else:
+            values = self.rows.take(self.cursor, axis=0)
+            self.cursor = self.cursor + self._one  # array operands: cheaper than += 1
         self._countdown -= 1
         if self._countdown == 0:
             self._refill(np.flatnonzero(self.cursor - self.first_row == BLOCK))

@@ -380,6 +380,16 @@ def _si_factor(column: str, unit: Any, expected: str) -> float:
     return factor
 
 
+def check_suffix(path: str | Path) -> Path:
+    """``path`` as a Path if its suffix names a recording format (.csv, .parquet).
+
+    :raises ValueError: any other suffix (before any work is done, e.g. a long simulation).
+    """
+    path = Path(path)
+    _format(path)
+    return path
+
+
 def _format(path: Path) -> tuple[Callable[..., None], Callable[[Path], Any]]:
     """Writer and reader for the suffix of ``path``."""
     formats = {".csv": (_write_csv, _read_csv), ".parquet": (_write_parquet, _read_parquet)}

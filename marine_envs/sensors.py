@@ -144,8 +144,11 @@ class Quantizer(Stage):
                              "> 0 (use None for an unquantized channel)")
         # mu shaped (1, channels): equal-rank operands broadcast faster
         self.idx, self.mu = as_index(np.flatnonzero(active)), step[active][None, :]
+        self.every_channel = bool(active.all())
 
     def __call__(self, z: FloatArray) -> FloatArray:
+        if self.every_channel:
+            return quantize(z, self.mu)
         z[:, self.idx] = quantize(z[:, self.idx], self.mu)
         return z
 

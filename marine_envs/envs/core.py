@@ -176,11 +176,13 @@ class Simulator:
         Larger actions are clipped and noted in :attr:`clipped`.
         :raises ValueError: NaN or inf in the action, or a wrong shape.
         """
-        a = np.asarray(action, dtype=np.float64)
-        if a.size != self.u.size:
-            raise ValueError(f"action has shape {a.shape}; expected {self.u.shape[1]} value(s) "
-                             f"per environment for {self.batch_size} environment(s)")
-        a = a.reshape(self.u.shape)
+        a = np.asarray(action)
+        if a.size != self.u.size or a.dtype.kind not in "fiub":
+            raise ValueError(f"action has shape {a.shape} and dtype {a.dtype}; expected "
+                             f"{self.u.shape[1]} number(s) per environment for "
+                             f"{self.batch_size} environment(s)")
+        # one conversion up front: mixed float32/float64 arithmetic is slower
+        a = a.reshape(self.u.shape).astype(np.float64, copy=False)
         # numpy reductions have microseconds of overhead: small actions are checked in Python
         peak = max(map(abs, a.ravel().tolist())) if a.size <= 64 else np.abs(a).max()
         if not math.isfinite(peak):
@@ -204,7 +206,8 @@ class Simulator:
         reward = (error * error) @ self._weights
         self.x = self.integrate(xud)
         self.steps = self.steps + self._one
-        failed = np.logical_or.reduce(np.abs(self.x[:, self._limited]) > self._limits, axis=1)
+        exceeded = np.abs(self.x[:, self._limited]) > self._limits
+        failed = exceeded[:, 0] if exceeded.shape[1] == 1 else exceeded.any(axis=1)
         return reward, failed
 
     def measure(self) -> FloatArray:
