@@ -16,7 +16,6 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
-from numpy.typing import NDArray
 
 from .core import Simulator
 
@@ -77,7 +76,8 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
         sim = self.sim
         return {"state": sim.x[0], "action_applied": sim.u[0],
                 "action_clipped": bool(sim.clipped[0]), "disturbance": sim.d[0],
-                "measurement_mask": sim.sensors.valid[0].copy(), "time": float(sim.steps[0]) * sim.dt}
+                "measurement_mask": sim.sensors.valid[0].copy(),
+                "time": float(sim.steps[0]) * sim.dt}
 
     def render(self):
         if self.render_mode != "rgb_array":

@@ -31,8 +31,8 @@ class USVRenderer:
     """
 
     def __init__(self, model: VehicleModel, size: tuple[int, int] = (640, 320)) -> None:
-        from matplotlib.figure import Figure
         from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
 
         self.model = model
         dpi = 80
@@ -58,7 +58,8 @@ class USVRenderer:
         self.hull_section = self.stern.fill([], [], color="tab:blue", alpha=0.8)[0]
         self.readout = self.figure.text(0.5, 0.02, "", ha="center", fontsize=9, family="monospace")
 
-    def draw(self, x: NDArray[np.float64], u: NDArray[np.float64], time: float) -> NDArray[np.uint8]:
+    def draw(self, x: NDArray[np.float64], u: NDArray[np.float64],
+             time: float) -> NDArray[np.uint8]:
         """An RGB frame (height x width x 3) of state ``x`` and input ``u`` at ``time`` (s)."""
         names = self.model.state_names
         psi, phi, delta = x[names.index("psi")], x[names.index("phi")], u[0]

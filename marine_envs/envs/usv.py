@@ -94,8 +94,9 @@ class USVEnv(MarineEnv):
     ## Observation Space
     ``Box((4,), float32)``: the seed's measured channels ``[r, psi, p, phi]`` (rad/s, rad,
     rad/s, rad) after bias, Gaussian noise, heading wrapping to (-pi, pi], quantization, sensor
-    full scale (90 deg/s gyros, 90 deg inclinometer), delay and dropout, as configured. Default noise std 0.1 deg/s, 0.2 deg, 0.1 deg/s, 0.1 deg; default
-    quantization steps 0.05 deg/s, 0.1 deg, 0.05 deg/s, 0.1 deg.
+    full scale (90 deg/s gyros, 90 deg inclinometer), delay and dropout, as configured. Default
+    noise std 0.1 deg/s, 0.2 deg, 0.1 deg/s, 0.1 deg; default quantization steps 0.05 deg/s,
+    0.1 deg, 0.05 deg/s, 0.1 deg.
 
     ## Rewards
     Minus the discrete-LQR stage cost ``x_k'Q x_k + u_k'R u_k`` of the state and rudder at the

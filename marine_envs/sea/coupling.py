@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..models import VehicleModel
-from .waves import G, Coupling
+from .waves import Coupling, G
 
 
 @dataclasses.dataclass(frozen=True)

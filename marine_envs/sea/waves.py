@@ -21,9 +21,9 @@ constant rotation ``exp(i omega_e,j dt)`` per step, and every disturbance channe
 
 Components split the band holding 99.8 % of the energy into bins of equal energy (so they crowd
 where the spectrum is high, not on its long omega^-5 tail); each component's variance is its bin's
-integrated energy, so Hs is exact by construction. Within its bin a component sits at an
-energy fraction given by a golden-ratio sequence, so no two are commensurate (a uniform grid
-would repeat the record every ``2 pi / d_omega`` seconds).
+integrated energy, so the realised Hs is that of the band (0.1 % below the target's). Within its
+bin a component sits at an energy fraction given by a golden-ratio sequence, so no two are
+commensurate (a uniform grid would repeat the record every ``2 pi / d_omega`` seconds).
 
 A significant wave height that varies in time (:class:`Schedule`) scales the amplitudes each step;
 when the spectral shape itself follows Hs (the one-parameter PM, ``tp=None``) the amplitudes are
@@ -83,6 +83,8 @@ class Schedule:
     @classmethod
     def from_points(cls, points: Sequence[Sequence[float]]) -> Schedule:
         """From ``[(t0, v0), (t1, v1), ...]``."""
+        if len(points) == 0 or any(len(p) != 2 for p in points):
+            raise ValueError(f"schedule {points!r} is invalid: give (time, value) pairs")
         times, values = zip(*points, strict=True)
         return cls(tuple(map(float, times)), tuple(map(float, values)))
 
