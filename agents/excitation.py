@@ -8,20 +8,22 @@ their own seeded generator.
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 
-class Excitation:
-    """Base class: a deterministic function of the step index ``k`` (time ``k * dt``)."""
+class Excitation(ABC):
+    """Base class: a function of the step index ``k`` (time ``k * dt``)."""
 
     def __init__(self, n_inputs: int, dt: float) -> None:
         self.n_inputs, self.dt, self.k = n_inputs, dt, 0
 
-    def value(self, t: float) -> NDArray[np.float64]:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abstractmethod
+    def value(self, t: float) -> NDArray[np.float64]:
+        """Actions (normalised) at time ``t``, s."""
 
     def predict(self, observation: Any = None, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[NDArray[np.float32], None]:

@@ -15,6 +15,7 @@ streams that the same boats would consume one by one: a batched environment equa
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from typing import Literal
 
@@ -43,18 +44,20 @@ def per_channel(name: str, value: float | Mapping[str, float] | None, channels: 
     return np.full(len(channels), float(value))
 
 
-class Stage:
-    """One step of the measurement chain. Subclasses override :meth:`__call__`, which may
-    overwrite its input array (the suite owns it) and returns the stage's output."""
+class Stage(ABC):
+    """One step of the measurement chain. :meth:`__call__` may overwrite its input array (the
+    suite owns it) and returns the stage's output."""
 
-    def bind(self, batch_size: int) -> None:
+    def bind(self, batch_size: int) -> None:  # noqa: B027 - stateless stages keep this default
         """Allocate per-boat state for ``batch_size`` boats."""
 
-    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+    def reset(self, idx: NDArray[np.intp],  # noqa: B027 - stateless stages keep this default
+              rngs: Sequence[np.random.Generator]) -> None:
         """Start new episodes for boats ``idx`` (``rngs[i]`` is boat ``idx[i]``'s generator)."""
 
-    def __call__(self, z: FloatArray) -> FloatArray:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abstractmethod
+    def __call__(self, z: FloatArray) -> FloatArray:
+        """Measurements of ``z`` (batch x channels)."""
 
 
 def as_index(idx: NDArray[np.intp]) -> slice | NDArray[np.intp]:
@@ -71,8 +74,9 @@ class _RandomStage(Stage):
     def __init__(self, width: int) -> None:
         self._stream = BlockStream(width, self._draw_blocks)
 
-    def _draw(self, rng: np.random.Generator) -> FloatArray:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abstractmethod
+    def _draw(self, rng: np.random.Generator) -> FloatArray:
+        """One boat's next block of random numbers (BLOCK x width)."""
 
     def _draw_blocks(self, idx: NDArray[np.intp]) -> FloatArray:
         return np.stack([self._draw(self._rngs[i]) for i in idx])

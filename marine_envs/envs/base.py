@@ -8,6 +8,7 @@ contract 2: observations are sensor outputs, ``info["state"]`` is the true state
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -20,6 +21,16 @@ from gymnasium.vector.utils import batch_space
 from .core import Simulator
 
 _ONE = np.array([0])
+#: Builds the object whose ``draw(x, u, time)`` returns an RGB frame (and ``close()``).
+RendererFactory = Callable[[], Any]
+
+
+def _check_render_mode(render_mode: str | None, metadata: dict[str, Any],
+                       renderer: RendererFactory | None) -> None:
+    if render_mode is not None and render_mode not in metadata["render_modes"]:
+        raise ValueError(f"render_mode={render_mode!r} is invalid: None or 'rgb_array'")
+    if render_mode is not None and renderer is None:
+        raise ValueError(f"render_mode={render_mode!r}: this environment has no renderer")
 
 
 def _spaces(sim: Simulator) -> tuple[spaces.Box, spaces.Box]:
@@ -40,10 +51,10 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, sim: Simulator, render_mode: str | None = None,
-                 wave_seed: int | None = None) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode={render_mode!r} is invalid: None or 'rgb_array'")
+                 wave_seed: int | None = None, renderer: RendererFactory | None = None) -> None:
+        _check_render_mode(render_mode, self.metadata, renderer)
         self.sim, self.render_mode, self.wave_seed = sim, render_mode, wave_seed
+        self._make_renderer = renderer
         self.metadata = {**self.metadata, "render_fps": round(1 / sim.dt)}
         self.action_space, self.observation_space = _spaces(sim)
         self.dt = sim.dt
@@ -86,9 +97,6 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
             self._renderer = self._make_renderer()
         return self._renderer.draw(self.sim.x[0], self.sim.u[0], self.sim.steps[0] * self.dt)
 
-    def _make_renderer(self):  # pragma: no cover - per vehicle
-        raise NotImplementedError(f"{type(self).__name__} has no renderer")
-
     def close(self) -> None:
         if self._renderer is not None:
             self._renderer.close()
@@ -107,13 +115,14 @@ class MarineVectorEnv(VectorEnv):
                                           "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, sim: Simulator, num_envs: int, max_episode_steps: int | None,
-                 render_mode: str | None = None, wave_seed: int | None = None) -> None:
+                 render_mode: str | None = None, wave_seed: int | None = None,
+                 renderer: RendererFactory | None = None) -> None:
         if not (isinstance(num_envs, int | np.integer) and num_envs >= 1):
             raise ValueError(f"num_envs={num_envs!r} is invalid: an integer >= 1")
         if max_episode_steps is not None and max_episode_steps < 1:
             raise ValueError(f"max_episode_steps={max_episode_steps!r} is invalid: >= 1 or None")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode={render_mode!r} is invalid: None or 'rgb_array'")
+        _check_render_mode(render_mode, self.metadata, renderer)
+        self._make_renderer = renderer
         self.sim, self.num_envs, self.max_episode_steps = sim, int(num_envs), max_episode_steps
         self.render_mode, self.wave_seed, self.dt = render_mode, wave_seed, sim.dt
         self.single_action_space, self.single_observation_space = _spaces(sim)
@@ -176,9 +185,6 @@ class MarineVectorEnv(VectorEnv):
             self._renderer = self._make_renderer()
         return tuple(self._renderer.draw(x, u, t * self.dt)
                      for x, u, t in zip(self.sim.x, self.sim.u, self.sim.steps, strict=True))
-
-    def _make_renderer(self):  # pragma: no cover - per vehicle
-        raise NotImplementedError(f"{type(self).__name__} has no renderer")
 
     def close_extras(self, **kwargs: Any) -> None:
         if self._renderer is not None:

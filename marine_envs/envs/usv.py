@@ -13,6 +13,7 @@ from ..sea import MeasuredSpectrum, SeaState, WaveRealisation, wave_coupling
 from ..sensors import SensorSuite, per_channel
 from .base import MarineEnv, MarineVectorEnv
 from .core import Simulator, make_task
+from .rendering import USVRenderer
 
 DEG = math.pi / 180
 #: Sensor defaults per measured channel (SI): noise standard deviation and quantization step.
@@ -139,13 +140,9 @@ class USVEnv(MarineEnv):
 
     def __init__(self, render_mode: str | None = None, wave_seed: int | None = None,
                  **kwargs: Any) -> None:
-        super().__init__(make_usv_simulator(**kwargs), render_mode=render_mode,
-                         wave_seed=wave_seed)
-
-    def _make_renderer(self):
-        from .rendering import USVRenderer
-
-        return USVRenderer(self.sim.model)
+        sim = make_usv_simulator(**kwargs)
+        super().__init__(sim, render_mode=render_mode, wave_seed=wave_seed,
+                         renderer=lambda: USVRenderer(sim.model))
 
 
 class USVVectorEnv(MarineVectorEnv):
@@ -154,10 +151,6 @@ class USVVectorEnv(MarineVectorEnv):
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000,
                  render_mode: str | None = None, wave_seed: int | None = None,
                  **kwargs: Any) -> None:
-        super().__init__(make_usv_simulator(**kwargs), num_envs, max_episode_steps,
-                         render_mode=render_mode, wave_seed=wave_seed)
-
-    def _make_renderer(self):
-        from .rendering import USVRenderer
-
-        return USVRenderer(self.sim.model)
+        sim = make_usv_simulator(**kwargs)
+        super().__init__(sim, num_envs, max_episode_steps, render_mode=render_mode,
+                         wave_seed=wave_seed, renderer=lambda: USVRenderer(sim.model))
