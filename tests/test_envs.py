@@ -151,6 +151,15 @@ def test_out_of_range_action_is_clipped_and_reported():
     np.testing.assert_array_equal(info["action_clipped"], [False, True, False])
 
 
+def test_resetting_one_boat_keeps_the_others_clip_flags():
+    sim = make_usv_simulator()
+    sim.bind(2)
+    sim.reset(np.arange(2), [np.random.default_rng(i) for i in range(2)])
+    sim.apply(np.array([[5.0], [-5.0]]))
+    sim.reset(np.array([1]), [np.random.default_rng(9)])
+    np.testing.assert_array_equal(sim.clipped, [True, False])
+
+
 @pytest.mark.parametrize("kwargs, name", [
     ({"hs": -1.0}, "hs"), ({"hs": float("nan")}, "hs"), ({"tp": 0.0}, "tp"),
     ({"quantization": 0.0}, "quantization"), ({"quantization": {"psi": -0.1}}, "quantization"),

@@ -69,7 +69,7 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode. ``options={"state": x0}`` sets the initial true state (state units)."""
         super().reset(seed=seed)
-        x0 = _initial_state(self.sim, options, batch=1)
+        x0 = _initial_state(self.sim, options)
         wave_rngs = None if self.wave_seed is None else [np.random.default_rng(self.wave_seed)]
         self.sim.reset(_ONE, [self.np_random], x0=x0, wave_rngs=wave_rngs)
         obs = self.sim.measure()[0].astype(np.float32)
@@ -146,7 +146,7 @@ class MarineVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed: {len(seeds)} seeds for {self.num_envs} environments")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        x0 = _initial_state(self.sim, options, batch=self.num_envs)
+        x0 = _initial_state(self.sim, options)
         self.sim.reset(self._all, self._rngs, x0=x0, wave_rngs=self._wave_rngs(self._all))
         self._done[:] = False
         return self.sim.measure().astype(np.float32), self._info()
@@ -192,7 +192,7 @@ class MarineVectorEnv(VectorEnv):
             self._renderer = None
 
 
-def _initial_state(sim: Simulator, options: dict[str, Any] | None, batch: int):
+def _initial_state(sim: Simulator, options: dict[str, Any] | None):
     """The ``state`` reset option, validated; None when the initial state is to be drawn."""
     if not options:
         return None

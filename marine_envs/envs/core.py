@@ -165,7 +165,9 @@ class Simulator:
         for i, rng in zip(idx, rngs, strict=True):
             self.x[i] = self.initial_state(rng) if x0 is None else x0
         self.u[idx], self.d[idx], self.steps[idx] = self.model.u0, 0, 0
-        self.clipped = self._never_clipped
+        if self.clipped[idx].any():
+            self.clipped = self.clipped.copy()
+            self.clipped[idx] = False
         if self.waves is not None:
             self.waves.reset(idx, rngs if wave_rngs is None else wave_rngs)
         self.sensors.reset(idx, rngs)
