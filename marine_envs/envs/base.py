@@ -51,9 +51,9 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, sim: Simulator, render_mode: str | None = None,
-                 wave_seed: int | None = None, renderer: RendererFactory | None = None) -> None:
+                 renderer: RendererFactory | None = None) -> None:
         _check_render_mode(render_mode, self.metadata, renderer)
-        self.sim, self.render_mode, self.wave_seed = sim, render_mode, wave_seed
+        self.sim, self.render_mode = sim, render_mode
         self._make_renderer = renderer
         self.metadata = {**self.metadata, "render_fps": round(1 / sim.dt)}
         self.action_space, self.observation_space = _spaces(sim)
@@ -70,8 +70,7 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
         """Start an episode. ``options={"state": x0}`` sets the initial true state (state units)."""
         super().reset(seed=seed)
         x0 = _initial_state(self.sim, options)
-        wave_rngs = None if self.wave_seed is None else [np.random.default_rng(self.wave_seed)]
-        self.sim.reset(_ONE, [self.np_random], x0=x0, wave_rngs=wave_rngs)
+        self.sim.reset(_ONE, [self.np_random], x0=x0)
         obs = self.sim.measure()[0].astype(np.float32)
         return obs, self._info()
 
@@ -115,8 +114,7 @@ class MarineVectorEnv(VectorEnv):
                                           "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, sim: Simulator, num_envs: int, max_episode_steps: int | None,
-                 render_mode: str | None = None, wave_seed: int | None = None,
-                 renderer: RendererFactory | None = None) -> None:
+                 render_mode: str | None = None, renderer: RendererFactory | None = None) -> None:
         if not (isinstance(num_envs, int | np.integer) and num_envs >= 1):
             raise ValueError(f"num_envs={num_envs!r} is invalid: an integer >= 1")
         if max_episode_steps is not None and max_episode_steps < 1:
@@ -124,7 +122,7 @@ class MarineVectorEnv(VectorEnv):
         _check_render_mode(render_mode, self.metadata, renderer)
         self._make_renderer = renderer
         self.sim, self.num_envs, self.max_episode_steps = sim, int(num_envs), max_episode_steps
-        self.render_mode, self.wave_seed, self.dt = render_mode, wave_seed, sim.dt
+        self.render_mode, self.dt = render_mode, sim.dt
         self.single_action_space, self.single_observation_space = _spaces(sim)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -147,7 +145,7 @@ class MarineVectorEnv(VectorEnv):
                 raise ValueError(f"seed: {len(seeds)} seeds for {self.num_envs} environments")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
         x0 = _initial_state(self.sim, options)
-        self.sim.reset(self._all, self._rngs, x0=x0, wave_rngs=self._wave_rngs(self._all))
+        self.sim.reset(self._all, self._rngs, x0=x0)
         self._done[:] = False
         return self.sim.measure().astype(np.float32), self._info()
 
@@ -159,16 +157,11 @@ class MarineVectorEnv(VectorEnv):
             else np.zeros(self.num_envs, dtype=bool)
         if self._done.any():
             idx = np.flatnonzero(self._done)
-            sim.reset(idx, [self._rngs[i] for i in idx], wave_rngs=self._wave_rngs(idx))
+            sim.reset(idx, [self._rngs[i] for i in idx])
             reward[idx], terminated[idx], truncated[idx] = 0.0, False, False
         self._done = terminated | truncated
         obs = sim.measure().astype(np.float32)
         return obs, reward, terminated, truncated, self._info()
-
-    def _wave_rngs(self, idx):
-        if self.wave_seed is None:
-            return None
-        return [np.random.default_rng(self.wave_seed) for _ in idx]
 
     def _info(self) -> dict[str, Any]:
         sim, m = self.sim, self._mask

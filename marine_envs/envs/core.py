@@ -113,11 +113,13 @@ class Simulator:
     :param dt: control period, s.
     :param initial_state: draws one boat's initial state from its generator.
     :param integrator: ``"exact"`` (linear models only) or ``"rk4"``.
+    :param wave_seed: if set, every episode sees the same wave realisation (noise still varies).
     """
 
     def __init__(self, model: VehicleModel, sensors: SensorSuite, task: Task,
                  waves: WaveRealisation | None, dt: float, initial_state: InitialState,
-                 integrator: Literal["exact", "rk4"] = "exact", substeps: int = 4) -> None:
+                 integrator: Literal["exact", "rk4"] = "exact", substeps: int = 4,
+                 wave_seed: int | None = None) -> None:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt={dt!r} is invalid: the control period must be > 0 s")
         if integrator == "exact" and not model.is_linear:
@@ -125,14 +127,14 @@ class Simulator:
         if integrator not in ("exact", "rk4"):
             raise ValueError(f"integrator={integrator!r} is invalid: 'exact' or 'rk4'")
         self.model, self.sensors, self.task, self.waves = model, sensors, task, waves
-        self.dt, self.initial_state = dt, initial_state
+        self.dt, self.initial_state, self.wave_seed = dt, initial_state, wave_seed
         self.integrate = ExactLinear(model, dt) if integrator == "exact" else RK4(model, dt,
                                                                                  substeps)
         self.measured = as_index(np.array([model.state_names.index(c) for c in sensors.channels]))
-        self.u_low, self.u_high = model.u_bounds
+        low, high = model.u_bounds
         # shaped (1, n_u): numpy broadcasts equal-rank operands faster
-        self.u_scale = ((self.u_high - self.u_low) / 2)[None, :]
-        self.u_mid = ((self.u_high + self.u_low) / 2)[None, :]
+        self.u_scale = ((high - low) / 2)[None, :]
+        self.u_mid = ((high + low) / 2)[None, :]
         limited = np.flatnonzero(np.isfinite(task.limits))
         self._limited = as_index(limited)
         self._limits = task.limits[limited][None, :]
@@ -157,8 +159,7 @@ class Simulator:
             self.waves.bind(batch_size)
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator],
-              x0: ArrayLike | None = None, wave_rngs: Sequence[np.random.Generator] | None = None
-              ) -> None:
+              x0: ArrayLike | None = None) -> None:
         """New episodes for boats ``idx``: initial state, wave phases, sensor state."""
         # fresh arrays, never written in place: info dicts may hold views of the old ones
         self.x, self.u, self.d = self.x.copy(), self.u.copy(), self.d.copy()
@@ -169,7 +170,9 @@ class Simulator:
             self.clipped = self.clipped.copy()
             self.clipped[idx] = False
         if self.waves is not None:
-            self.waves.reset(idx, rngs if wave_rngs is None else wave_rngs)
+            frozen = self.wave_seed is not None
+            self.waves.reset(idx, [np.random.default_rng(self.wave_seed) for _ in idx]
+                             if frozen else rngs)
         self.sensors.reset(idx, rngs)
 
     def apply(self, action: ArrayLike) -> None:

@@ -51,6 +51,7 @@ def make_usv_simulator(
     state_weights: Mapping[str, float] | None = None,
     input_weights: Mapping[str, float] | None = None,
     max_roll: float = 40 * DEG,
+    wave_seed: int | None = None,
 ) -> Simulator:
     """The USV simulator; the keyword arguments are those of :class:`USVEnv` (see there)."""
     model = USVModel().with_params(**(params or {}))
@@ -76,7 +77,7 @@ def make_usv_simulator(
     def initial_state(rng: np.random.Generator) -> np.ndarray:
         return model.x0 + spread * rng.uniform(-1.0, 1.0, spread.size)
 
-    return Simulator(model, sensors, task, realisation, dt, initial_state)
+    return Simulator(model, sensors, task, realisation, dt, initial_state, wave_seed=wave_seed)
 
 
 class USVEnv(MarineEnv):
@@ -138,19 +139,16 @@ class USVEnv(MarineEnv):
     * ``render_mode``: None or "rgb_array" (heading, roll and rudder drawn; works with RecordVideo).
     """
 
-    def __init__(self, render_mode: str | None = None, wave_seed: int | None = None,
-                 **kwargs: Any) -> None:
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
         sim = make_usv_simulator(**kwargs)
-        super().__init__(sim, render_mode=render_mode, wave_seed=wave_seed,
-                         renderer=lambda: USVRenderer(sim.model))
+        super().__init__(sim, render_mode=render_mode, renderer=lambda: USVRenderer(sim.model))
 
 
 class USVVectorEnv(MarineVectorEnv):
     """``num_envs`` USVs stepped together with array operations; arguments as :class:`USVEnv`."""
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000,
-                 render_mode: str | None = None, wave_seed: int | None = None,
-                 **kwargs: Any) -> None:
+                 render_mode: str | None = None, **kwargs: Any) -> None:
         sim = make_usv_simulator(**kwargs)
         super().__init__(sim, num_envs, max_episode_steps, render_mode=render_mode,
-                         wave_seed=wave_seed, renderer=lambda: USVRenderer(sim.model))
+                         renderer=lambda: USVRenderer(sim.model))
