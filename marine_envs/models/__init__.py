@@ -7,12 +7,19 @@
 
 from __future__ import annotations
 
+import importlib
+
 from .base import VehicleModel
 from .usv import USVModel, USVParams
 
-_MODELS: dict[str, type[VehicleModel]] = {"usv": USVModel}
-#: Models specified in MODELS.md that later issues add.
-PLANNED = ("hydrofoil", "rov", "dp_vessel", "hovercraft")
+#: Model name -> "module:class"; modules are imported on first use.
+_MODELS: dict[str, str] = {
+    "usv": "usv:USVModel",
+    "hydrofoil": "hydrofoil:HydrofoilModel",
+    "rov": "rov:ROVModel",
+    "dp_vessel": "dp_vessel:DPVesselModel",
+    "hovercraft": "hovercraft:HovercraftModel",
+}
 
 
 def model_names() -> tuple[str, ...]:
@@ -26,11 +33,10 @@ def get_model(name: str, **params: float) -> VehicleModel:
     :raises ValueError: unknown model name or parameter, or a parameter out of range.
     """
     try:
-        cls = _MODELS[name]
+        module, cls = _MODELS[name].split(":")
     except KeyError:
-        hint = f" ({name!r} is planned but not implemented yet)" if name in PLANNED else ""
-        raise ValueError(f"unknown model {name!r}{hint}; available: {', '.join(_MODELS)}") from None
-    model = cls()
+        raise ValueError(f"unknown model {name!r}; available: {', '.join(_MODELS)}") from None
+    model = getattr(importlib.import_module(f".{module}", __name__), cls)()
     return model.with_params(**params) if params else model
 
 

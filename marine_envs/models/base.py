@@ -56,6 +56,22 @@ class VehicleModel(ABC):
         """Nominal input that holds :attr:`x0` in equilibrium with zero disturbance."""
         return np.zeros(len(self.input_names))
 
+    # -- outputs: what a sensor can measure ---------------------------------------------------
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        """Quantities a sensor can measure: the states, plus any derived outputs a model adds
+        (e.g. the DP vessel's position = low-frequency + wave-frequency motion)."""
+        return self.state_names
+
+    @property
+    def output_units(self) -> tuple[str, ...]:
+        """SI unit of each output, in the order of :attr:`output_names`."""
+        return self.state_units
+
+    def output(self, x: FloatArray) -> FloatArray:
+        """All outputs of states ``x`` (shape ``(..., n_x)``), shape ``(..., n_outputs)``."""
+        return x
+
     @property
     @abstractmethod
     def u_bounds(self) -> tuple[FloatArray, FloatArray]:
