@@ -51,11 +51,15 @@ class LQRPolicy:
     :param K: gain on the full state (n_u x n_x).
     :param observed: indices of the states the observation holds, in order; None = full state.
     :param x_ref, u_ref: reference state and input (physical units).
-    :param u_low, u_high: physical input limits mapped to actions -1 and +1.
+    :param u_low, u_high: physical limits mapped to actions -1 and +1 (of the inputs, or of the
+        actuators when ``allocation`` is given).
+    :param allocation: ``(n_actuators, n_inputs)`` map from inputs to actuator commands (e.g. the
+        pseudo-inverse of a thruster allocation matrix), or None when actions are the inputs.
     """
 
     def __init__(self, K: ArrayLike, observed: ArrayLike | None, x_ref: ArrayLike,
-                 u_ref: ArrayLike, u_low: ArrayLike, u_high: ArrayLike) -> None:
+                 u_ref: ArrayLike, u_low: ArrayLike, u_high: ArrayLike,
+                 allocation: ArrayLike | None = None) -> None:
         self.K = np.atleast_2d(np.asarray(K, dtype=float))
         idx = np.arange(self.K.shape[1]) if observed is None else np.asarray(observed)
         self.K_observed = self.K[:, idx]
@@ -63,6 +67,7 @@ class LQRPolicy:
         self.u_ref = np.asarray(u_ref, dtype=float)
         self.u_mid = (np.asarray(u_high) + np.asarray(u_low)) / 2
         self.u_half = (np.asarray(u_high) - np.asarray(u_low)) / 2
+        self.allocation = None if allocation is None else np.asarray(allocation, dtype=float)
 
     @classmethod
     def for_env(cls, env: Any, observed: str | None = "sensors") -> LQRPolicy:
@@ -72,18 +77,25 @@ class LQRPolicy:
             ``info["state"]`` or an estimator's output).
         """
         sim = env.unwrapped.sim
-        A, B, _ = sim.model.linearize()
+        A, B, _ = sim.model.linearize(sim.task.x_ref, sim.task.u_ref)
         K = lqr_gain(A, B, np.diag(sim.task.q), np.diag(sim.task.r), dt=sim.dt)
         idx = None
         if observed == "sensors":
+            missing = sorted(set(sim.sensors.channels) - set(sim.model.state_names))
+            if missing:
+                raise ValueError(f"LQR on the sensors needs measured states; {missing} are "
+                                 "not states: use an estimator and observed=None")
             idx = [sim.model.state_names.index(c) for c in sim.sensors.channels]
-        low, high = sim.model.u_bounds
-        return cls(K, idx, sim.task.x_ref, sim.task.u_ref, low, high)
+        act = sim.actuation
+        allocation = None if act.matrix is None else np.linalg.pinv(act.matrix)
+        return cls(K, idx, sim.task.x_ref, sim.task.u_ref, act.low, act.high, allocation)
 
     def predict(self, observation: ArrayLike, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[NDArray[np.float32], None]:
         """Actions in [-1, 1] for one observation or a batch (SB3's signature)."""
         obs = np.asarray(observation, dtype=float)
         u = self.u_ref - (obs - self.x_ref) @ self.K_observed.T
+        if self.allocation is not None:
+            u = u @ self.allocation.T
         action = np.clip((u - self.u_mid) / self.u_half, -1.0, 1.0)
         return action.astype(np.float32), None

@@ -3,8 +3,8 @@
 A :class:`SensorSuite` maps true channel values ``z`` (batch x channels, SI units) to measurements
 through a chain of small stages, each configured per channel and vectorised over the batch::
 
-    bias -> Gaussian noise -> angle wrapping -> quantizer -> saturation -> delay
-    -> dropout (hold last value)
+    bias -> Gaussian noise -> angle wrapping -> quantizer -> saturation
+    -> sample and hold (sensors slower than the control loop) -> delay -> dropout (hold)
 
 Every stage works on a batch of independent sensor suites (one per boat of a vector environment).
 Randomness comes from each boat's own ``np.random.Generator`` (handed down from
@@ -260,6 +260,36 @@ class Delay(Stage):
         return self.buf[self._rows, slots[None, :], self._channels[None, :]]
 
 
+class SampleHold(Stage):
+    """A sensor slower than the control loop: channel c is sampled every ``period[c]`` control
+    steps (from the first step of an episode) and held in between.
+
+    After each call :attr:`valid` tells which channels carry a fresh sample (for estimators).
+    """
+
+    def __init__(self, period: ArrayLike) -> None:
+        period = np.asarray(period)
+        if not (np.all(period >= 1) and np.all(period == np.round(period))):
+            raise ValueError(f"sample_period={period.tolist()} is invalid: whole control steps "
+                             ">= 1 needed")
+        self.period = period.astype(np.int64)[None, :]
+
+    def bind(self, batch_size: int) -> None:
+        self.count = np.zeros((batch_size, 1), dtype=np.int64)
+        self.last = np.zeros((batch_size, self.period.size))
+        self.valid = np.ones((batch_size, self.period.size), dtype=bool)
+        self._one = np.ones((1, 1), dtype=np.int64)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        self.count[idx] = 0
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        self.valid = self.count % self.period == 0
+        self.count = self.count + self._one
+        self.last = np.where(self.valid, z, self.last)
+        return self.last
+
+
 class Dropout(_RandomStage):
     """Each sample of a channel is lost with probability ``prob``; the last value is held.
 
@@ -303,16 +333,18 @@ class SensorSuite:
     def __init__(self, channels: Sequence[str], stages: Sequence[Stage]) -> None:
         self.channels = tuple(channels)
         self.stages = list(stages)
-        self._dropout = next((s for s in self.stages if isinstance(s, Dropout)), None)
+        self._masking = [s for s in self.stages if isinstance(s, SampleHold | Dropout)]
 
     @classmethod
     def standard(cls, channels: Sequence[str], *, noise_std=None, bias=None, quantization=None,
-                 sensor_range=None, delay=None, dropout=None, wrap: Sequence[str] = (),
+                 sensor_range=None, sample_period=None, delay=None, dropout=None,
+                 wrap: Sequence[str] = (),
                  quantizer: Literal["static", "zooming"] = "static",
                  zoom_k: float = 0.6) -> SensorSuite:
         """The usual chain from per-channel settings (scalars or ``{channel: value}``).
 
         Stages whose settings are all zero/None are left out, so they cost nothing.
+        ``sample_period`` gives each sensor's period in control steps (1 = every step).
         ``quantization`` gives the static step per channel (channel units), ``sensor_range`` the
         full scale (outputs clamped to +-range; wrapped angles need none); with
         ``quantizer="zooming"`` it selects the channels quantized by the seed-000 zooming law.
@@ -341,6 +373,9 @@ class SensorSuite:
         full_scale = per_channel("sensor_range", sensor_range, channels, default=math.inf)
         if np.isfinite(full_scale).any():
             stages.append(Saturation(full_scale))
+        period = per_channel("sample_period", sample_period, channels, default=1)
+        if np.any(period != 1):
+            stages.append(SampleHold(period))
         lag = per_channel("delay", delay, channels)
         if np.any(lag != 0):
             stages.append(Delay(lag))
@@ -387,4 +422,8 @@ class SensorSuite:
     @property
     def valid(self) -> NDArray[np.bool_]:
         """Which channels carried a fresh sample at the last :meth:`measure` (False = held)."""
-        return self._all_valid if self._dropout is None else self._dropout.valid
+        if not self._masking:
+            return self._all_valid
+        if len(self._masking) == 1:
+            return self._masking[0].valid
+        return self._masking[0].valid & self._masking[1].valid

@@ -34,8 +34,7 @@ def _check_render_mode(render_mode: str | None, metadata: dict[str, Any],
 
 
 def _spaces(sim: Simulator) -> tuple[spaces.Box, spaces.Box]:
-    n_u = len(sim.model.input_names)
-    action = spaces.Box(-1.0, 1.0, (n_u,), dtype=np.float32)
+    action = spaces.Box(-1.0, 1.0, (sim.n_actions,), dtype=np.float32)
     high = sim.sensors.output_range.astype(np.float32)
     return action, spaces.Box(-high, high, dtype=np.float32)
 

@@ -17,7 +17,7 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from ..models import VehicleModel
-from ..sea import WaveRealisation
+from ..sea.processes import DisturbanceSource
 from ..sensors import SensorSuite, as_index, per_channel
 
 FloatArray = NDArray[np.float64]
@@ -103,38 +103,84 @@ class RK4:
 InitialState = Callable[[np.random.Generator], FloatArray]
 
 
+@dataclasses.dataclass(frozen=True)
+class Actuation:
+    """How actions reach the model: each action in [-1, 1] commands an actuator over
+    ``[low, high]`` (its physical range), and ``matrix`` maps actuator outputs to the model's
+    inputs (``u = matrix @ f``; None = the actuators are the inputs), e.g. thruster forces to
+    generalised forces through an allocation matrix.
+
+    :param names: actuator names, one per action.
+    :param low, high: actuator ranges, actuator units.
+    :param matrix: ``(n_inputs, n_actuators)`` map, or None.
+    """
+
+    names: tuple[str, ...]
+    low: FloatArray
+    high: FloatArray
+    matrix: FloatArray | None = None
+
+    @classmethod
+    def direct(cls, model: VehicleModel) -> Actuation:
+        """Actions command the model's inputs over :attr:`VehicleModel.u_bounds`."""
+        low, high = model.u_bounds
+        return cls(model.input_names, np.asarray(low, float), np.asarray(high, float))
+
+    def __post_init__(self) -> None:
+        if not (len(self.names) == self.low.size == self.high.size
+                and np.all(self.low < self.high)):
+            raise ValueError(f"actuator ranges low={self.low.tolist()} high="
+                             f"{self.high.tolist()} are invalid for {self.names}: low < high")
+
+
 class Simulator:
-    """Steps a batch of boats: waves -> dynamics -> cost -> sensors.
+    """Steps a batch of boats: disturbances -> dynamics -> cost -> sensors.
 
     :param model: the vehicle model.
     :param sensors: the sensor chain over some of the model's states (by name).
     :param task: cost and termination.
-    :param waves: the wave realisation (its channels are the model's disturbances), or None.
+    :param disturbances: the source of the model's disturbance inputs (a wave realisation,
+        :mod:`~marine_envs.sea.processes`, or several stacked), or None for none.
     :param dt: control period, s.
     :param initial_state: draws one boat's initial state from its generator.
     :param integrator: ``"exact"`` (linear models only) or ``"rk4"``.
-    :param wave_seed: if set, every episode sees the same wave realisation (noise still varies).
+    :param substeps: RK4 steps per control period.
+    :param disturbance_seed: if set, every episode sees the same disturbance realisation (the
+        same sea); sensor noise and initial states still vary.
+    :param actuation: how actions become inputs; default: directly, over the model's bounds.
     """
 
     def __init__(self, model: VehicleModel, sensors: SensorSuite, task: Task,
-                 waves: WaveRealisation | None, dt: float, initial_state: InitialState,
-                 integrator: Literal["exact", "rk4"] = "exact", substeps: int = 4,
-                 wave_seed: int | None = None) -> None:
+                 disturbances: DisturbanceSource | None, dt: float,
+                 initial_state: InitialState, integrator: Literal["exact", "rk4"] = "exact",
+                 substeps: int = 4, disturbance_seed: int | None = None,
+                 actuation: Actuation | None = None) -> None:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt={dt!r} is invalid: the control period must be > 0 s")
         if integrator == "exact" and not model.is_linear:
             raise ValueError(f"integrator='exact' needs a linear model; {model.name!r} is not")
         if integrator not in ("exact", "rk4"):
             raise ValueError(f"integrator={integrator!r} is invalid: 'exact' or 'rk4'")
-        self.model, self.sensors, self.task, self.waves = model, sensors, task, waves
-        self.dt, self.initial_state, self.wave_seed = dt, initial_state, wave_seed
+        unknown = sorted(set(sensors.channels) - set(model.output_names))
+        if unknown:
+            raise ValueError(f"sensor channel(s) {unknown} are not outputs of model "
+                             f"{model.name!r}: {', '.join(model.output_names)}")
+        self.model, self.sensors, self.task = model, sensors, task
+        self.disturbances, self.disturbance_seed = disturbances, disturbance_seed
+        self.dt, self.initial_state = dt, initial_state
         self.integrate = ExactLinear(model, dt) if integrator == "exact" else RK4(model, dt,
                                                                                  substeps)
-        self.measured = as_index(np.array([model.state_names.index(c) for c in sensors.channels]))
-        low, high = model.u_bounds
-        # shaped (1, n_u): numpy broadcasts equal-rank operands faster
+        self._outputs_are_states = model.output_names == model.state_names
+        self.measured = as_index(np.array([model.output_names.index(c)
+                                           for c in sensors.channels]))
+        self.actuation = Actuation.direct(model) if actuation is None else actuation
+        self.n_actions = len(self.actuation.names)
+        low, high = self.actuation.low, self.actuation.high
+        # shaped (1, n): numpy broadcasts equal-rank operands faster
         self.u_scale = ((high - low) / 2)[None, :]
         self.u_mid = ((high + low) / 2)[None, :]
+        matrix = self.actuation.matrix
+        self._allocation = None if matrix is None else np.asarray(matrix, float).T.copy()
         limited = np.flatnonzero(np.isfinite(task.limits))
         self._limited = as_index(limited)
         self._limits = task.limits[limited][None, :]
@@ -155,12 +201,12 @@ class Simulator:
         self.steps = np.zeros(batch_size, dtype=np.int64)
         self._one = np.ones(1, dtype=np.int64)
         self.sensors.bind(batch_size)
-        if self.waves is not None:
-            self.waves.bind(batch_size)
+        if self.disturbances is not None:
+            self.disturbances.bind(batch_size)
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator],
               x0: ArrayLike | None = None) -> None:
-        """New episodes for boats ``idx``: initial state, wave phases, sensor state."""
+        """New episodes for boats ``idx``: initial state, disturbances, sensor state."""
         # fresh arrays, never written in place: info dicts may hold views of the old ones
         self.x, self.u, self.d = self.x.copy(), self.u.copy(), self.d.copy()
         for i, rng in zip(idx, rngs, strict=True):
@@ -169,25 +215,26 @@ class Simulator:
         if self.clipped[idx].any():
             self.clipped = self.clipped.copy()
             self.clipped[idx] = False
-        if self.waves is not None:
-            frozen = self.wave_seed is not None
-            self.waves.reset(idx, [np.random.default_rng(self.wave_seed) for _ in idx]
-                             if frozen else rngs)
+        if self.disturbances is not None:
+            frozen = self.disturbance_seed is not None
+            self.disturbances.reset(idx, [np.random.default_rng(self.disturbance_seed)
+                                          for _ in idx] if frozen else rngs)
         self.sensors.reset(idx, rngs)
 
     def apply(self, action: ArrayLike) -> None:
-        """Map normalised actions (batch x inputs) in [-1, 1] to physical inputs.
+        """Map normalised actions (batch x actuators) in [-1, 1] to physical inputs.
 
         Larger actions are clipped and noted in :attr:`clipped`.
         :raises ValueError: NaN or inf in the action, or a wrong shape.
         """
         a = np.asarray(action)
-        if a.size != self.u.size or a.dtype.kind not in "fiub":
+        shape = (self.batch_size, self.n_actions)
+        if a.size != shape[0] * shape[1] or a.dtype.kind not in "fiub":
             raise ValueError(f"action has shape {a.shape} and dtype {a.dtype}; expected "
-                             f"{self.u.shape[1]} number(s) per environment for "
+                             f"{self.n_actions} number(s) per environment for "
                              f"{self.batch_size} environment(s)")
         # one conversion up front: mixed float32/float64 arithmetic is slower
-        a = a.reshape(self.u.shape).astype(np.float64, copy=False)
+        a = a.reshape(shape).astype(np.float64, copy=False)
         # numpy reductions have microseconds of overhead: small actions are checked in Python
         peak = max(map(abs, a.ravel().tolist())) if a.size <= 64 else np.abs(a).max()
         if not math.isfinite(peak):
@@ -197,15 +244,16 @@ class Simulator:
             a = np.clip(a, -1.0, 1.0)
         else:
             self.clipped = self._never_clipped
-        self.u = self.u_mid + self.u_scale * a
+        f = self.u_mid + self.u_scale * a
+        self.u = f if self._allocation is None else f @ self._allocation
 
     def advance(self) -> tuple[FloatArray, NDArray[np.bool_]]:
         """One control period for every boat: returns ``(reward, failed)``.
 
         :raises FloatingPointError: a nonlinear model's state became NaN or inf.
         """
-        if self.waves is not None:
-            self.d = self.waves.step()
+        if self.disturbances is not None:
+            self.d = self.disturbances.step()
         xud = np.concatenate([self.x, self.u, self.d], axis=1)
         error = xud if self._reference is None else xud - self._reference
         reward = (error * error) @ self._weights
@@ -217,6 +265,7 @@ class Simulator:
 
     def measure(self) -> FloatArray:
         """Sensor outputs (batch x channels) of the current states."""
-        true = self.x[:, self.measured]
+        outputs = self.x if self._outputs_are_states else self.model.output(self.x)
+        true = outputs[:, self.measured]
         # the sensor chain overwrites its input: never hand it a view of the state
-        return self.sensors.measure(true.copy() if true.base is self.x else true)
+        return self.sensors.measure(true.copy() if true.base is outputs else true)

@@ -77,7 +77,8 @@ def make_usv_simulator(
     def initial_state(rng: np.random.Generator) -> np.ndarray:
         return model.x0 + spread * rng.uniform(-1.0, 1.0, spread.size)
 
-    return Simulator(model, sensors, task, realisation, dt, initial_state, wave_seed=wave_seed)
+    return Simulator(model, sensors, task, realisation, dt, initial_state,
+                     disturbance_seed=wave_seed)
 
 
 class USVEnv(MarineEnv):

@@ -1,0 +1,296 @@
+"""Hydrofoil: longitudinal heave/pitch of a small fully-submerged two-foil craft (seed 001;
+MODELS.md section 2). Everything below is **[RECON]**: a first-principles quasi-steady foil
+model built from the seed's table, with a few **[PROPOSED]** constants.
+
+Geometry (earth frame x forward, z down, origin on the calm surface): ``xi`` is the depth of the
+CG (positive down, so the trim ``xi0 = -1.04 m`` puts the CG above the water), ``theta`` is the
+pitch (bow-up positive). Foil i sits at body ``(x_i, l)`` with ``x_1 = +l1`` (front) and
+``x_2 = -l2`` (rear), at the bottom of the strut of length ``l``. For foil i = 1, 2::
+
+    h_i     = xi + l*cos(theta) - x_i*sin(theta) + eta_i             submergence, m
+    U_i     = U - u_w,i                                              inflow speed, m/s
+    alpha_i = theta + alpha_s,i + (xi_dot - x_i*theta_dot + zeta_dot_i) / U_i       rad
+    alpha_i = clip(alpha_i, -alpha_stall, +alpha_stall)                             stall
+    C_L,i   = a_i * k(h_i/c_i) * alpha_i,   k(r) = (1 + 16 r^2) / (2 + 16 r^2)
+    L_i     = 0.5*rho*U_i^2*S_i*C_L,i                                    N
+    D_i     = 0.5*rho*U_i^2*S_i*(CD0 + C_L,i^2/(pi*AR_i))                N
+    L_i = D_i = 0 when h_i <= 0 (foil broached)
+    f       = 0.5*rho*U^2*CDs*cs*max(0, (h_1 + h_2)/2)                   strut drag, N
+
+    m*xi_ddot    = m*g - (L_1 + L_2) - F0*sin(theta)
+    J*theta_ddot = l1*L_1 - l2*L_2 + l3*F0 - l*(D_1 + D_2) - l4*f
+
+with ``S_i = span_i*chord_i``, ``AR_i = span_i/chord_i`` and the lift slope ``a_i`` of Prandtl's
+lifting line ``2 pi AR/(AR + 2)`` (default) or Helmbold's ``2 pi AR/(2 + sqrt(AR^2 + 4))``
+(about 11 % lower). The thrust ``F0`` is held at its trim value, solved at construction from
+``xi_ddot = theta_ddot = 0`` and ``F0 cos(theta0) = D_1 + D_2 + f`` at ``(xi0, theta0)``.
+
+``x = [xi, theta, xi_dot, theta_dot]`` (m, rad, m/s, rad/s), absolute, not deviations from
+trim; ``u = [alpha_s1, alpha_s2]`` (rad), the absolute foil rotation angles;
+``d = [zeta_dot_1, zeta_dot_2, eta_1, eta_2, u_w1, u_w2]`` (m/s, m/s, m, m, m/s, m/s): the upward
+sub-surface orbital velocity at each foil, the surface elevation above each foil (positive up)
+and the horizontal orbital velocity along +x at each foil (MODELS.md 2.3-2.4). The seed's model
+uses only the ``zeta_dot`` channels; ``eta`` and ``u_w`` belong to the richer truth model.
+
+Options: ``added_mass=True`` adds the heave added mass of each foil,
+``rho*pi*(c/2)^2*b*AR/(1 + AR)`` **[PROPOSED formula]** (19.7 kg front, 4.0 kg rear), acting at
+the foil on its vertical acceleration ``xi_ddot - x_i*theta_ddot``; this couples the heave and
+pitch inertia through a constant 2x2 mass matrix (wave-induced added-mass forces are not
+modelled). Left out, as MODELS.md 2.6 lists: the lift-below-CG pendulum term, unsteady lift lag,
+ventilation. Linearised at trim the model has one slow unstable real pole (+0.17 1/s, heave) and
+a stiff pitch/heave pair; with the seed's LQR a closed-loop pole sits near -8846 1/s, so
+integrate with dt <= 1e-4 s (RK4) or discretise the linearisation exactly.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import ClassVar, Literal
+
+import numpy as np
+import scipy.optimize
+from numpy.typing import ArrayLike
+
+from .base import FloatArray, VehicleModel, require
+
+
+@dataclasses.dataclass(frozen=True)
+class HydrofoilParams:
+    """Parameters of the hydrofoil model; names are MODELS.md's symbols. SI units, radians."""
+
+    m: float = 102.04  #: mass, kg  [SEED]
+    J: float = 14.35  #: pitch moment of inertia J_yy, kg m^2  [SEED]
+    g: float = 9.80  #: gravity, m/s^2  [SEED: the seed uses 9.80]
+    rho: float = 1025.0  #: seawater density, kg/m^3  [global convention]
+    l: float = 2.0  #: strut ("connecting rod") length: foils sit l below the CG, m  [SEED; RECON]
+    l1: float = 0.2  #: front foil ahead of the CG, m  [SEED]
+    l2: float = 1.0  #: rear foil behind the CG, m  [SEED]
+    l3: float = 1.9  #: thrust line below the CG, m  [SEED]
+    l4: float = 0.2  #: strut-drag moment arm, m  [SEED; seed-literal]
+    span1: float = 0.67  #: front foil span, m  [SEED]
+    chord1: float = 0.22  #: front foil chord, m  [SEED]
+    span2: float = 0.39  #: rear foil span, m  [SEED]
+    chord2: float = 0.13  #: rear foil chord, m  [SEED]
+    U: float = 6.08  #: forward speed, held constant, m/s  [SEED]
+    theta0: float = math.radians(2.0)  #: trim pitch, rad  [SEED]
+    xi0: float = -1.04  #: trim CG depth (positive down; negative = above water), m  [SEED]
+    CD0: float = 0.008  #: foil profile drag coefficient, -  [PROPOSED]
+    CDs: float = 0.012  #: strut drag coefficient, -  [PROPOSED]
+    cs: float = 0.10  #: strut chord, m  [PROPOSED]
+    alpha_stall: float = math.radians(12.0)  #: stall clip on the angle of attack, rad [PROPOSED]
+    lift_slope: Literal["prandtl", "helmbold"] = "prandtl"  #: lift-slope formula  [RECON choice]
+    added_mass: bool = False  #: add the foils' heave added mass  [PROPOSED; off as in the seed]
+    #: foil rotation limit |alpha_s,i| <= alpha_max, rad  [PROPOSED: 15 deg, a little beyond the
+    #: 12 deg stall so the controller can reach stall but not flip the foil]
+    alpha_max: float = math.radians(15.0)
+
+    def __post_init__(self) -> None:
+        positive = ("m", "J", "g", "rho", "l", "span1", "chord1", "span2", "chord2", "U")
+        for name in positive:
+            value = getattr(self, name)
+            require(math.isfinite(value) and value > 0, name, value, "must be finite and > 0")
+        for name in ("l1", "l2", "l3", "l4", "CD0", "CDs", "cs"):
+            value = getattr(self, name)
+            require(math.isfinite(value) and value >= 0, name, value, "must be finite and >= 0")
+        require(math.isfinite(self.xi0), "xi0", self.xi0, "must be finite (m)")
+        require(math.isfinite(self.theta0) and abs(self.theta0) < math.pi / 4, "theta0",
+                self.theta0, "must be finite with |theta0| < pi/4 rad")
+        for name in ("alpha_stall", "alpha_max"):
+            value = getattr(self, name)
+            require(math.isfinite(value) and 0 < value < math.pi / 2, name, value,
+                    "must be in (0, pi/2) rad")
+        require(self.lift_slope in ("prandtl", "helmbold"), "lift_slope", self.lift_slope,
+                "must be 'prandtl' or 'helmbold'")
+        require(isinstance(self.added_mass, bool), "added_mass", self.added_mass,
+                "must be True or False")
+
+    @property
+    def aspect_ratio(self) -> FloatArray:
+        """Foil aspect ratios ``span/chord`` [front, rear], -."""
+        return np.array([self.span1 / self.chord1, self.span2 / self.chord2])
+
+    @property
+    def area(self) -> FloatArray:
+        """Foil planform areas ``span*chord`` [front, rear], m^2."""
+        return np.array([self.span1 * self.chord1, self.span2 * self.chord2])
+
+    @property
+    def chord(self) -> FloatArray:
+        """Foil chords [front, rear], m."""
+        return np.array([self.chord1, self.chord2])
+
+    @property
+    def foil_x(self) -> FloatArray:
+        """Foil positions along body +x from the CG [front, rear] = [+l1, -l2], m."""
+        return np.array([self.l1, -self.l2])
+
+    @property
+    def lift_curve_slope(self) -> FloatArray:
+        """3-D lift slope a_i [front, rear], 1/rad (Prandtl or Helmbold, per ``lift_slope``)."""
+        ar = self.aspect_ratio
+        if self.lift_slope == "helmbold":
+            return 2 * np.pi * ar / (2 + np.sqrt(ar**2 + 4))
+        return 2 * np.pi * ar / (ar + 2)
+
+    @property
+    def foil_added_mass(self) -> FloatArray:
+        """Heave added mass ``rho*pi*(c/2)^2*b*AR/(1+AR)`` of each foil, kg  [PROPOSED formula]."""
+        ar = self.aspect_ratio
+        return self.rho * np.pi * (self.chord / 2) ** 2 * self.area / self.chord * ar / (1 + ar)
+
+
+@dataclasses.dataclass(frozen=True)
+class HydrofoilTrim:
+    """The trim (equilibrium) at ``(xi0, theta0)``, speed U, calm water. Arrays are
+    [front, rear].
+
+    :param alpha_s0: foil angles, rad.
+    :param F0: thrust, N.
+    :param L: lift, N.   :param C_L: lift coefficient, -.   :param D: foil drag, N.
+    :param f: strut drag, N.   :param h: foil submergence, m.
+    """
+
+    alpha_s0: FloatArray
+    F0: float
+    L: FloatArray
+    C_L: FloatArray
+    D: FloatArray
+    f: float
+    h: FloatArray
+
+
+class HydrofoilModel(VehicleModel):
+    """Heave/pitch of a fully-submerged two-foil craft at constant speed (seed 001).
+
+    :param params: :class:`HydrofoilParams`; ``None`` for the nominal (seed) craft.
+    :raises ValueError: the parameters admit no trim with both foils submerged and unstalled.
+    """
+
+    name: ClassVar[str] = "hydrofoil"
+    state_names: ClassVar[tuple[str, ...]] = ("xi", "theta", "xi_dot", "theta_dot")
+    input_names: ClassVar[tuple[str, ...]] = ("alpha_s1", "alpha_s2")
+    disturbance_names: ClassVar[tuple[str, ...]] = (
+        "zeta_dot_1", "zeta_dot_2", "eta_1", "eta_2", "u_w1", "u_w2")
+    state_units: ClassVar[tuple[str, ...]] = ("m", "rad", "m/s", "rad/s")
+    input_units: ClassVar[tuple[str, ...]] = ("rad", "rad")
+    disturbance_units: ClassVar[tuple[str, ...]] = ("m/s", "m/s", "m", "m", "m/s", "m/s")
+    is_linear: ClassVar[bool] = False
+
+    def __init__(self, params: HydrofoilParams | None = None) -> None:
+        super().__init__(HydrofoilParams() if params is None else params)
+        p = self.params
+        # constants of rhs, precomputed: it runs 4x per control step on large batches
+        self._x = p.foil_x
+        self._inv_c = 1 / p.chord
+        self._a = p.lift_curve_slope
+        self._qS = 0.5 * p.rho * p.area  # dynamic pressure per U^2 times area, kg/m
+        self._induced = 1 / (np.pi * p.aspect_ratio)
+        self._strut = 0.5 * p.rho * p.U**2 * p.CDs * p.cs  # strut drag per m of depth, N/m
+        if p.added_mass:
+            ma = p.foil_added_mass
+            mass = np.array([[p.m + ma.sum(), -(ma * self._x).sum()],
+                             [-(ma * self._x).sum(), p.J + (ma * self._x**2).sum()]])
+        else:
+            mass = np.diag([p.m, p.J])
+        # generalised forces [heave force (N), pitch moment (N m)] -> accelerations
+        self._inv_mass = np.linalg.inv(mass)
+        self._F0 = 0.0
+        self.trim = self._solve_trim()
+        self._F0 = self.trim.F0
+
+    # -- nominal operating point -------------------------------------------------------------
+    @property
+    def x0(self) -> FloatArray:
+        """Trim state ``[xi0, theta0, 0, 0]`` (m, rad, m/s, rad/s)."""
+        return np.array([self.params.xi0, self.params.theta0, 0.0, 0.0])
+
+    @property
+    def u0(self) -> FloatArray:
+        """Trim foil angles ``alpha_s0`` (rad)."""
+        return self.trim.alpha_s0.copy()
+
+    @property
+    def F0(self) -> float:
+        """Trim thrust, held constant, N."""
+        return self._F0
+
+    @property
+    def u_bounds(self) -> tuple[FloatArray, FloatArray]:
+        """Foil rotation limits ``+-alpha_max`` (rad) on both foils."""
+        a = self.params.alpha_max
+        return np.array([-a, -a]), np.array([a, a])
+
+    # -- dynamics ------------------------------------------------------------------------------
+    def _forces(self, x: FloatArray, u: FloatArray, d: FloatArray, F: float | FloatArray):
+        """Heave force (N, down), pitch moment (N m, bow-up) and the pieces they are made of."""
+        p = self.params
+        xi, theta = x[..., 0:1], x[..., 1:2]
+        xi_dot, theta_dot = x[..., 2:3], x[..., 3:4]
+        sin, cos = np.sin(theta), np.cos(theta)
+        # per-foil quantities on a trailing axis of length 2 [front, rear]
+        h = xi + p.l * cos - self._x * sin + d[..., 2:4]
+        U_i = p.U - d[..., 4:6]
+        alpha = theta + u + (xi_dot - self._x * theta_dot + d[..., 0:2]) / U_i
+        alpha = np.clip(alpha, -p.alpha_stall, p.alpha_stall)
+        r2 = 16 * (h * self._inv_c) ** 2
+        C_L = self._a * (1 - 1 / (2 + r2)) * alpha  # k(r) = (1 + 16r^2)/(2 + 16r^2)
+        q = np.where(h > 0, self._qS * U_i**2, 0.0)  # a broached foil carries nothing
+        L = q * C_L
+        D = q * (p.CD0 + C_L**2 * self._induced)
+        f = self._strut * np.maximum(0.5 * (h[..., 0] + h[..., 1]), 0.0)
+        sin = sin[..., 0]
+        heave = p.m * p.g - (L[..., 0] + L[..., 1]) - F * sin
+        pitch = (p.l1 * L[..., 0] - p.l2 * L[..., 1] + p.l3 * F
+                 - p.l * (D[..., 0] + D[..., 1]) - p.l4 * f)
+        return heave, pitch, L, C_L, D, f, h
+
+    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
+        """Continuous-time state derivative (MODELS.md 2.3).
+
+        :param x: ``[xi, theta, xi_dot, theta_dot]``, shape ``(..., 4)``, m, rad, m/s, rad/s.
+        :param u: ``[alpha_s1, alpha_s2]``, shape ``(..., 2)``, rad (absolute foil angles).
+        :param d: ``[zeta_dot_1, zeta_dot_2, eta_1, eta_2, u_w1, u_w2]``, shape ``(..., 6)``,
+            m/s, m/s, m, m, m/s, m/s; ``None`` means calm water.
+        :return: ``[xi_dot, theta_dot, xi_ddot, theta_ddot]``, shape ``(..., 4)``, m/s, rad/s,
+            m/s^2, rad/s^2.
+        """
+        x, u, d = self._split(x, u, d)
+        heave, pitch = self._forces(x, u, d, self._F0)[:2]
+        M = self._inv_mass
+        if self.params.added_mass:
+            xi_ddot = M[0, 0] * heave + M[0, 1] * pitch
+            theta_ddot = M[1, 0] * heave + M[1, 1] * pitch
+        else:  # diagonal mass: skip the cross terms (and keep exact 1/m, 1/J scaling)
+            xi_ddot = heave * M[0, 0]
+            theta_ddot = pitch * M[1, 1]
+        return np.stack(np.broadcast_arrays(x[..., 2], x[..., 3], xi_ddot, theta_ddot), axis=-1)
+
+    # -- trim ----------------------------------------------------------------------------------
+    def _solve_trim(self) -> HydrofoilTrim:
+        """Foil angles and thrust holding ``(xi0, theta0)`` in calm water at speed U."""
+        p = self.params
+        x0, d0 = self.x0, np.zeros(len(self.disturbance_names))
+
+        def residual(z: FloatArray) -> FloatArray:
+            heave, pitch, _, _, D, f, _ = self._forces(x0, z[:2], d0, z[2])
+            return np.array([heave, pitch, z[2] * math.cos(p.theta0) - D.sum() - f])
+
+        # guess: the weight split between the foils by moments, drag-free
+        share = np.array([p.l2, p.l1]) / (p.l1 + p.l2) if p.l1 + p.l2 > 0 else np.full(2, 0.5)
+        lift = p.m * p.g * share
+        guess_alpha = lift / (self._qS * p.U**2 * self._a) - p.theta0
+        z, _, ok, message = scipy.optimize.fsolve(
+            residual, np.append(guess_alpha, 0.1 * p.m * p.g), xtol=1e-13, full_output=True)
+        heave, pitch, L, C_L, D, f, h = self._forces(x0, z[:2], d0, z[2])
+        alpha = p.theta0 + z[:2]
+        if ok != 1 or np.abs(residual(z)).max() > 1e-6 * p.m * p.g:
+            raise ValueError(f"no trim found for these parameters ({message.strip()}): {p!r}")
+        require(bool(np.all(h > 0)), "xi0", p.xi0, f"must keep both foils submerged at trim "
+                f"(h = {h.tolist()} m)")
+        require(bool(np.all(np.abs(alpha) < p.alpha_stall)), "alpha_stall", p.alpha_stall,
+                f"must exceed the trim angles of attack {alpha.tolist()} rad")
+        require(bool(np.all(np.abs(z[:2]) <= p.alpha_max)), "alpha_max", p.alpha_max,
+                f"must allow the trim foil angles {z[:2].tolist()} rad")
+        return HydrofoilTrim(alpha_s0=z[:2].copy(), F0=float(z[2]), L=L, C_L=C_L, D=D,
+                             f=float(f), h=h)

@@ -1,0 +1,171 @@
+"""Slow and random exogenous signals besides waves: current, wind, bias, events.
+
+Every source follows the protocol of :class:`~marine_envs.sea.waves.WaveRealisation`, which the
+simulator drives: ``bind(batch_size)``, ``reset(idx, rngs)`` at episode start (drawing only from
+the boats' own generators, so a batch equals the same boats one by one) and ``step()`` returning
+the next value of every boat, shape ``(batch, width)``. :class:`Stacked` puts sources side by side
+so that together they feed all of a model's disturbance inputs.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Protocol
+
+import numpy as np
+import scipy.signal
+from numpy.typing import ArrayLike, NDArray
+
+from ..blocks import BLOCK, BlockStream
+
+FloatArray = NDArray[np.float64]
+
+
+class DisturbanceSource(Protocol):
+    """What the simulator needs of a disturbance source."""
+
+    def bind(self, batch_size: int) -> None: ...
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None: ...
+
+    def step(self) -> FloatArray: ...
+
+
+def _channels(name: str, value: ArrayLike, width: int | None = None) -> FloatArray:
+    arr = np.atleast_1d(np.asarray(value, dtype=float))
+    if arr.ndim != 1 or (width is not None and arr.size not in (1, width)):
+        raise ValueError(f"{name}={np.asarray(value).tolist()!r} is invalid: one value per "
+                         f"channel ({width} channels)")
+    return np.broadcast_to(arr, (width or arr.size,)).copy()
+
+
+class GaussMarkov:
+    """First-order Gauss-Markov processes, one per channel: ``x_dot = -(x - mean)/T + noise``.
+
+    Sampled exactly at the control period, so ``x_{k+1} = mean + a (x_k - mean) + std sqrt(1-a^2)
+    n_k`` with ``a = exp(-dt/T)``, and each episode starts in the stationary distribution
+    ``N(mean, std^2)``. ``T = 0`` gives white noise held over each step (std ``std``);
+    ``T = inf`` a constant drawn at the start of each episode.
+
+    :param mean: mean per channel (channel units).
+    :param std: stationary standard deviation per channel (>= 0).
+    :param time_constant: correlation time T per channel, s (>= 0, may be inf).
+    :param dt: sampling period, s.
+    """
+
+    def __init__(self, mean: ArrayLike, std: ArrayLike, time_constant: ArrayLike,
+                 dt: float) -> None:
+        self.mean = _channels("mean", mean)
+        width = self.mean.size
+        self.std = _channels("std", std, width)
+        tau = _channels("time_constant", time_constant, width)
+        if not np.all(np.isfinite(self.std) & (self.std >= 0)):
+            raise ValueError(f"std={self.std.tolist()} is invalid: must be finite and >= 0")
+        if not np.all(tau >= 0):
+            raise ValueError(f"time_constant={tau.tolist()} is invalid: must be >= 0 s")
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt={dt!r} is invalid: must be > 0 s")
+        with np.errstate(divide="ignore"):
+            self.a = np.exp(-dt / tau)
+        self.gain = self.std * np.sqrt(1 - self.a**2)
+        self.width = width
+        self._stream = BlockStream(width, self._fill)
+
+    def bind(self, batch_size: int) -> None:
+        self._stream.bind(batch_size)
+        self._rngs: list[np.random.Generator] = [np.random.default_rng(0)] * batch_size
+        self._last = np.zeros((batch_size, self.width))
+        self._start = np.ones(batch_size, dtype=bool)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        for i, rng in zip(idx, rngs, strict=True):
+            self._rngs[i] = rng
+        self._start[idx] = True
+        self._stream.restart(idx)
+
+    def step(self) -> FloatArray:
+        return self._stream.next()
+
+    def _fill(self, idx: NDArray[np.intp]) -> FloatArray:
+        noise = np.stack([self._rngs[i].standard_normal((BLOCK, self.width)) for i in idx])
+        # a new episode starts in the stationary distribution; a refill continues the last value
+        starting = self._start[idx, None]
+        first = np.where(starting, self.std * noise[:, 0], 0.0)
+        previous = np.where(starting, 0.0, self._last[idx])
+        noise[:, 0] = np.where(starting, 0.0, noise[:, 0])
+        decay = self.a ** np.arange(BLOCK)[:, None]  # a**0 = 1 also for white noise (a = 0)
+        block = first[:, None, :] * decay
+        for c in range(self.width):  # each channel has its own filter coefficient
+            filtered, _ = scipy.signal.lfilter([self.gain[c]], [1.0, -self.a[c]], noise[:, :, c],
+                                               axis=1, zi=self.a[c] * previous[:, c:c + 1])
+            block[:, :, c] += filtered
+        self._last[idx], self._start[idx] = block[:, -1], False
+        return block + self.mean
+
+
+class StepEvent:
+    """Channels that jump from ``before`` to ``after`` once per episode, at a given time or at a
+    time drawn uniformly from ``window`` (e.g. the ROV's morph command).
+
+    :param before, after: values per channel.
+    :param time: switching time, s; or None to draw it from ``window``.
+    :param window: ``(earliest, latest)`` switching time, s, when ``time`` is None.
+    :param dt: sampling period, s.
+    """
+
+    def __init__(self, before: ArrayLike, after: ArrayLike, *, dt: float,
+                 time: float | None = None,
+                 window: tuple[float, float] | None = None) -> None:
+        self.before = _channels("before", before)
+        self.after = _channels("after", after, self.before.size)
+        self.width = self.before.size
+        if (time is None) == (window is None):
+            raise ValueError("give exactly one of time=... (s) and window=(earliest, latest)")
+        if time is not None and not (math.isfinite(time) and time >= 0):
+            raise ValueError(f"time={time!r} is invalid: a switching time >= 0 s")
+        if window is not None and not (len(window) == 2 and 0 <= window[0] <= window[1]
+                                       and math.isfinite(window[1])):
+            raise ValueError(f"window={window!r} is invalid: (earliest, latest) with "
+                             "0 <= earliest <= latest s")
+        self.time, self.window, self.dt = time, window, dt
+
+    def bind(self, batch_size: int) -> None:
+        self._switch_step = np.zeros(batch_size, dtype=np.int64)
+        self._step = np.zeros(batch_size, dtype=np.int64)
+        self._one = np.ones(1, dtype=np.int64)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        for i, rng in zip(idx, rngs, strict=True):
+            t = self.time if self.window is None else rng.uniform(*self.window)
+            self._switch_step[i] = math.ceil(t / self.dt - 1e-9)
+        self._step[idx] = 0
+
+    def step(self) -> FloatArray:
+        switched = self._step >= self._switch_step
+        self._step = self._step + self._one
+        return np.where(switched[:, None], self.after, self.before)
+
+    def switch_time(self) -> FloatArray:
+        """Each boat's switching time this episode, s (on the step grid)."""
+        return self._switch_step * self.dt
+
+
+class Stacked:
+    """Several sources side by side: their columns concatenated in the order given."""
+
+    def __init__(self, *sources: DisturbanceSource) -> None:
+        if not sources:
+            raise ValueError("Stacked needs at least one source")
+        self.sources = sources
+
+    def bind(self, batch_size: int) -> None:
+        for source in self.sources:
+            source.bind(batch_size)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        for source in self.sources:
+            source.reset(idx, rngs)
+
+    def step(self) -> FloatArray:
+        return np.concatenate([source.step() for source in self.sources], axis=1)
