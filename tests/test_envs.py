@@ -76,8 +76,8 @@ def test_same_seed_same_episode_different_seed_different_waves():
     assert not np.allclose(first[4], other[4])
 
 
-def test_wave_seed_freezes_the_sea_but_not_the_noise():
-    env = gym.make(ENV_ID, wave_seed=5, initial_spread={})
+def test_disturbance_seed_freezes_the_sea_but_not_the_noise():
+    env = gym.make(ENV_ID, disturbance_seed=5, initial_spread={})
     records = []
     for seed in (1, 2):
         obs, _ = env.reset(seed=seed)

@@ -19,18 +19,23 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from .core import Simulator
+from .rendering import TimeSeriesRenderer
 
 _ONE = np.array([0])
-#: Builds the object whose ``draw(x, u, time)`` returns an RGB frame (and ``close()``).
+#: Builds the object whose ``draw(x, u, time)`` returns an RGB frame (and ``close()``);
+#: default: strip charts (:class:`~marine_envs.envs.rendering.TimeSeriesRenderer`).
 RendererFactory = Callable[[], Any]
 
 
-def _check_render_mode(render_mode: str | None, metadata: dict[str, Any],
-                       renderer: RendererFactory | None) -> None:
+def _check_render_mode(render_mode: str | None, metadata: dict[str, Any]) -> None:
     if render_mode is not None and render_mode not in metadata["render_modes"]:
         raise ValueError(f"render_mode={render_mode!r} is invalid: None or 'rgb_array'")
-    if render_mode is not None and renderer is None:
-        raise ValueError(f"render_mode={render_mode!r}: this environment has no renderer")
+
+
+def _strip_charts(sim: Simulator) -> RendererFactory:
+    """The default renderer: strip charts of the states the task weighs, and the inputs."""
+    weighted = tuple(n for n, q in zip(sim.model.state_names, sim.task.q, strict=True) if q > 0)
+    return lambda: TimeSeriesRenderer(sim.model, weighted)
 
 
 def _spaces(sim: Simulator) -> tuple[spaces.Box, spaces.Box]:
@@ -51,9 +56,9 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def __init__(self, sim: Simulator, render_mode: str | None = None,
                  renderer: RendererFactory | None = None) -> None:
-        _check_render_mode(render_mode, self.metadata, renderer)
+        _check_render_mode(render_mode, self.metadata)
         self.sim, self.render_mode = sim, render_mode
-        self._make_renderer = renderer
+        self._make_renderer = renderer or _strip_charts(sim)
         self.metadata = {**self.metadata, "render_fps": round(1 / sim.dt)}
         self.action_space, self.observation_space = _spaces(sim)
         self.dt = sim.dt
@@ -118,8 +123,8 @@ class MarineVectorEnv(VectorEnv):
             raise ValueError(f"num_envs={num_envs!r} is invalid: an integer >= 1")
         if max_episode_steps is not None and max_episode_steps < 1:
             raise ValueError(f"max_episode_steps={max_episode_steps!r} is invalid: >= 1 or None")
-        _check_render_mode(render_mode, self.metadata, renderer)
-        self._make_renderer = renderer
+        _check_render_mode(render_mode, self.metadata)
+        self._make_renderer = renderer or _strip_charts(sim)
         self.sim, self.num_envs, self.max_episode_steps = sim, int(num_envs), max_episode_steps
         self.render_mode, self.dt = render_mode, sim.dt
         self.single_action_space, self.single_observation_space = _spaces(sim)

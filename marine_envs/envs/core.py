@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import scipy.linalg
@@ -31,46 +31,89 @@ class Task:
     (u_k - u_ref)``, exactly the discrete LQR cost, so an episode's return is minus the LQR cost
     of its trajectory; the reward is ``-reward_scale * cost``. Angles enter the cost as the
     model's (unwrapped) linear states, as they do in LQR. An episode terminates when a state
-    leaves ``limits`` (absolute value, state units).
+    leaves ``[low, high]`` (state units; infinite where unconstrained).
     """
 
     q: FloatArray
     r: FloatArray
     x_ref: FloatArray
     u_ref: FloatArray
-    limits: FloatArray  #: per state; inf where unconstrained
+    low: FloatArray
+    high: FloatArray
     reward_scale: float = 1.0
 
 
 def make_task(model: VehicleModel, weights: Mapping[str, float], input_weights: Mapping[str, float],
               *, reference: Mapping[str, float] | None = None,
-              limits: Mapping[str, float] | None = None, reward_scale: float = 1.0) -> Task:
-    """A :class:`Task` from weights, reference and limits given by state and input name."""
+              limits: Mapping[str, float | tuple[float, float]] | None = None,
+              reward_scale: float = 1.0) -> Task:
+    """A :class:`Task` from weights, reference and limits given by state and input name.
+
+    :param reference: offsets from the model's nominal state ``x0``, by state name.
+    :param limits: per state, ``a`` for ``|x| <= a`` or ``(low, high)``; the episode ends outside.
+    """
     names = model.state_names
     q = per_channel("state_weights", weights, names)
     r = per_channel("input_weights", input_weights, model.input_names)
     if not (np.all(q >= 0) and np.all(r >= 0) and np.isfinite(q).all() and np.isfinite(r).all()):
         raise ValueError(f"state_weights={q.tolist()} / input_weights={r.tolist()} must be >= 0")
-    lim = per_channel("limits", limits, names, default=math.inf)
-    if not np.all(lim > 0):
-        raise ValueError(f"limits={lim.tolist()} is invalid: must be > 0")
+    pairs = {k: (-v, v) if np.isscalar(v) else tuple(v) for k, v in (limits or {}).items()}
+    low = per_channel("limits", {k: lo for k, (lo, _) in pairs.items()}, names, -math.inf)
+    high = per_channel("limits", {k: hi for k, (_, hi) in pairs.items()}, names, math.inf)
+    if not np.all(low < high):
+        raise ValueError(f"limits={limits!r} is invalid: each needs low < high (or a > 0)")
     return Task(q=q, r=r, x_ref=model.x0 + per_channel("reference", reference, names),
-                u_ref=model.u0, limits=lim, reward_scale=reward_scale)
+                u_ref=model.u0, low=low, high=high, reward_scale=reward_scale)
+
+
+#: Keyword arguments of :meth:`SensorSuite.standard` that every environment passes through.
+SENSOR_OPTIONS = ("noise_std", "bias", "quantization", "sensor_range", "sample_period", "delay",
+                  "dropout")
+
+
+def make_sensors(channels: Sequence[str], defaults: Mapping[str, Any],
+                 options: Mapping[str, Any], **fixed: Any) -> SensorSuite:
+    """An environment's sensor suite: each of :data:`SENSOR_OPTIONS` from ``options`` when the
+    user gave it (not None), else from the environment's ``defaults``.
+
+    :param fixed: further arguments of :meth:`SensorSuite.standard` (``wrap``, ``quantizer``).
+    """
+    chosen = {k: defaults.get(k) if options.get(k) is None else options[k]
+              for k in SENSOR_OPTIONS}
+    return SensorSuite.standard(channels, **chosen, **fixed)
+
+
+def uniform_initial_state(model: VehicleModel, spread: Mapping[str, float],
+                          centre: ArrayLike | None = None) -> InitialState:
+    """Initial states uniform within ``centre +- spread`` (default centre: the nominal state)."""
+    half_width = per_channel("initial_spread", spread, model.state_names)
+    if not np.all(np.isfinite(half_width) & (half_width >= 0)):
+        raise ValueError(f"initial_spread={dict(spread)!r} is invalid: half-widths >= 0")
+    middle = model.x0 if centre is None else np.asarray(centre, dtype=float)
+
+    def draw(rng: np.random.Generator) -> FloatArray:
+        return middle + half_width * rng.uniform(-1.0, 1.0, half_width.size)
+
+    return draw
 
 
 class ExactLinear:
-    """Exact discretisation of a linear model with inputs and disturbances held over a step:
+    """Exact discretisation of an affine model with inputs and disturbances held over a step:
     ``x_next = [x u d] @ transition + offset``."""
 
     def __init__(self, model: VehicleModel, dt: float) -> None:
         A, B, E = model.linearize()
         n, m = A.shape[0], B.shape[1] + E.shape[1]
-        block = np.zeros((n + m, n + m))
-        block[:n, :n], block[:n, n:] = A, np.hstack([B, E])
-        self.transition = scipy.linalg.expm(block * dt)[:n].T.copy()
         nominal = np.concatenate([model.x0, model.u0, np.zeros(E.shape[1])])
-        offset = model.x0 - nominal @ self.transition
-        self.offset = offset if np.any(offset) else None
+        # the affine part: x_dot = A x + [B E] [u d] + c
+        constant = model.rhs(model.x0, model.u0) - A @ model.x0 - B @ model.u0
+        block = np.zeros((n + m + 1, n + m + 1))
+        block[:n, :n], block[:n, n:-1], block[:n, -1] = A, np.hstack([B, E]), constant
+        phi = scipy.linalg.expm(block * dt)[:n]
+        self.transition = phi[:, :-1].T.copy()
+        offset = phi[:, -1]
+        self.offset = offset if np.abs(offset).max() > 1e-12 * (1 + np.abs(nominal).max()) \
+            else None
 
     def __call__(self, xud: FloatArray) -> FloatArray:
         x_next = xud @ self.transition
@@ -181,9 +224,9 @@ class Simulator:
         self.u_mid = ((high + low) / 2)[None, :]
         matrix = self.actuation.matrix
         self._allocation = None if matrix is None else np.asarray(matrix, float).T.copy()
-        limited = np.flatnonzero(np.isfinite(task.limits))
+        limited = np.flatnonzero(np.isfinite(task.low) | np.isfinite(task.high))
         self._limited = as_index(limited)
-        self._limits = task.limits[limited][None, :]
+        self._low, self._high = task.low[limited][None, :], task.high[limited][None, :]
         n_d = len(model.disturbance_names)
         # the reward is a weighted sum of squares of the stacked [x u d] vector
         self._weights = -task.reward_scale * np.concatenate([task.q, task.r, np.zeros(n_d)])
@@ -259,7 +302,8 @@ class Simulator:
         reward = (error * error) @ self._weights
         self.x = self.integrate(xud)
         self.steps = self.steps + self._one
-        exceeded = np.abs(self.x[:, self._limited]) > self._limits
+        watched = self.x[:, self._limited]
+        exceeded = (watched < self._low) | (watched > self._high)
         failed = exceeded[:, 0] if exceeded.shape[1] == 1 else exceeded.any(axis=1)
         return reward, failed
 

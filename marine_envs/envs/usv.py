@@ -6,13 +6,10 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any, Literal
 
-import numpy as np
-
 from ..models import USVModel
 from ..sea import MeasuredSpectrum, SeaState, WaveRealisation, wave_coupling
-from ..sensors import SensorSuite, per_channel
 from .base import MarineEnv, MarineVectorEnv
-from .core import Simulator, make_task
+from .core import Simulator, make_sensors, make_task, uniform_initial_state
 from .rendering import USVRenderer
 
 DEG = math.pi / 180
@@ -21,6 +18,8 @@ DEFAULT_NOISE = {"r": 0.1 * DEG, "psi": 0.2 * DEG, "p": 0.1 * DEG, "phi": 0.1 * 
 DEFAULT_QUANTIZATION = {"r": 0.05 * DEG, "psi": 0.1 * DEG, "p": 0.05 * DEG, "phi": 0.1 * DEG}
 #: Full scale of the rate gyros (90 deg/s) and the roll inclinometer (90 deg); heading wraps.
 DEFAULT_RANGE = {"r": math.pi / 2, "p": math.pi / 2, "phi": math.pi / 2}
+DEFAULT_SENSORS = {"noise_std": DEFAULT_NOISE, "quantization": DEFAULT_QUANTIZATION,
+                   "sensor_range": DEFAULT_RANGE}
 #: Bryson's rule: weight = 1 / (acceptable size)^2 -> heading 3 deg, roll 2 deg, rudder 10 deg.
 DEFAULT_STATE_WEIGHTS = {"psi": 1 / (3 * DEG) ** 2, "phi": 1 / (2 * DEG) ** 2}
 DEFAULT_INPUT_WEIGHTS = {"delta": 1 / (10 * DEG) ** 2}
@@ -45,22 +44,22 @@ def make_usv_simulator(
     quantizer: Literal["static", "zooming"] = "static",
     zoom_k: float = 0.6,
     bias: float | Mapping[str, float] | None = None,
+    sample_period: int | Mapping[str, int] | None = None,
     delay: int | Mapping[str, int] | None = None,
     dropout: float | Mapping[str, float] | None = None,
     initial_spread: Mapping[str, float] | None = None,
     state_weights: Mapping[str, float] | None = None,
     input_weights: Mapping[str, float] | None = None,
     max_roll: float = 40 * DEG,
-    wave_seed: int | None = None,
+    disturbance_seed: int | None = None,
 ) -> Simulator:
     """The USV simulator; the keyword arguments are those of :class:`USVEnv` (see there)."""
     model = USVModel().with_params(**(params or {}))
-    channels = USVModel.measured_names
-    sensors = SensorSuite.standard(
-        channels, noise_std=DEFAULT_NOISE if noise_std is None else noise_std,
-        quantization=DEFAULT_QUANTIZATION if quantization is None else quantization,
-        quantizer=quantizer, zoom_k=zoom_k, bias=bias, delay=delay, dropout=dropout,
-        sensor_range=DEFAULT_RANGE if sensor_range is None else sensor_range, wrap=("psi",))
+    sensors = make_sensors(
+        USVModel.measured_names, DEFAULT_SENSORS,
+        dict(noise_std=noise_std, quantization=quantization, sensor_range=sensor_range,
+             sample_period=sample_period, bias=bias, delay=delay, dropout=dropout),
+        wrap=("psi",), quantizer=quantizer, zoom_k=zoom_k)
     if not (math.isfinite(max_roll) and max_roll > 0):
         raise ValueError(f"max_roll={max_roll!r} is invalid: must be > 0 rad")
     task = make_task(model, DEFAULT_STATE_WEIGHTS if state_weights is None else state_weights,
@@ -70,15 +69,10 @@ def make_usv_simulator(
     realisation = WaveRealisation(
         sea, wave_coupling(model, wave_heading, **(coupling or {})), dt=dt, speed=speed,
         heading=wave_heading, n_components=n_wave_components) if waves else None
-    spread = per_channel("initial_spread",
-                         {"psi": 10 * DEG, "phi": 3 * DEG} if initial_spread is None
-                         else initial_spread, model.state_names)
-
-    def initial_state(rng: np.random.Generator) -> np.ndarray:
-        return model.x0 + spread * rng.uniform(-1.0, 1.0, spread.size)
-
+    initial_state = uniform_initial_state(
+        model, {"psi": 10 * DEG, "phi": 3 * DEG} if initial_spread is None else initial_spread)
     return Simulator(model, sensors, task, realisation, dt, initial_state,
-                     disturbance_seed=wave_seed)
+                     disturbance_seed=disturbance_seed)
 
 
 class USVEnv(MarineEnv):
@@ -129,14 +123,15 @@ class USVEnv(MarineEnv):
       ``speed``: ship speed for the encounter frequency, m/s (7.7 = 15 kn);
       ``n_wave_components`` (64); ``waves`` (True; False = calm water);
       ``coupling``: options of :class:`~marine_envs.sea.USVWaveCoupling`.
-    * ``noise_std``, ``bias``, ``quantization``, ``sensor_range`` (full scale), ``delay``
-      (samples), ``dropout`` (probability):
+    * ``noise_std``, ``bias``, ``quantization``, ``sensor_range`` (full scale),
+      ``sample_period`` (control steps per sample), ``delay`` (samples), ``dropout``
+      (probability):
       a number for every channel or ``{channel: value}``, SI units; ``quantizer``: "static" or
       "zooming" (seed 000's relative law, rate ``zoom_k``).
     * ``initial_spread``: ``{state: half-width}`` of the uniform initial state.
     * ``state_weights``, ``input_weights``: ``{name: weight}`` of the task cost.
     * ``max_roll``: roll angle that ends the episode, rad.
-    * ``wave_seed``: if set, every episode sees the same wave realisation (noise still varies).
+    * ``disturbance_seed``: if set, every episode sees the same sea (noise still varies).
     * ``render_mode``: None or "rgb_array" (heading, roll and rudder drawn; works with RecordVideo).
     """
 

@@ -127,6 +127,71 @@ class VehicleModel(ABC):
         return f"{type(self).__name__}({self.params!r})"
 
 
+class LinearizedModel(VehicleModel):
+    """The linearisation of a model about a point, as a model of its own (same names, units,
+    bounds and outputs): ``x_dot = f0 + A (x - x0) + B (u - u0) + E d`` with ``f0 = rhs(x0, u0)``.
+
+    Environments step it exactly (zero-order hold); estimators and LQR use it as their design
+    model. The difference to the nonlinear model is physics a diagnosis may find.
+
+    :param model: the nonlinear model.
+    :param x0, u0: the point (default: the model's nominal point).
+    """
+
+    is_linear: ClassVar[bool] = True
+
+    def __init__(self, model: VehicleModel, x0: ArrayLike | None = None,
+                 u0: ArrayLike | None = None) -> None:
+        super().__init__(model.params)
+        self.nonlinear = model
+        for attr in ("name", "state_names", "input_names", "disturbance_names", "state_units",
+                     "input_units", "disturbance_units"):
+            setattr(self, attr, getattr(model, attr))
+        self._x0 = model.x0 if x0 is None else np.asarray(x0, dtype=float)
+        self._u0 = model.u0 if u0 is None else np.asarray(u0, dtype=float)
+        self.A, self.B, self.E = model.linearize(self._x0, self._u0)
+        self.f0 = model.rhs(self._x0, self._u0)
+
+    @property
+    def x0(self) -> FloatArray:
+        return self._x0
+
+    @property
+    def u0(self) -> FloatArray:
+        return self._u0
+
+    @property
+    def u_bounds(self) -> tuple[FloatArray, FloatArray]:
+        return self.nonlinear.u_bounds
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return self.nonlinear.output_names
+
+    @property
+    def output_units(self) -> tuple[str, ...]:
+        return self.nonlinear.output_units
+
+    def output(self, x: FloatArray) -> FloatArray:
+        return self.nonlinear.output(x)
+
+    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
+        x, u, d = self._split(x, u, d)
+        return self.f0 + (x - self._x0) @ self.A.T + (u - self._u0) @ self.B.T + d @ self.E.T
+
+    def linearize(self, x0: ArrayLike | None = None, u0: ArrayLike | None = None,
+                  eps: float = 0.0) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The matrices (the same at every point)."""
+        return self.A, self.B, self.E
+
+    def with_params(self, **changes: float) -> LinearizedModel:
+        """The linearisation of the nonlinear model with some parameters replaced."""
+        return LinearizedModel(self.nonlinear.with_params(**changes))
+
+    def __repr__(self) -> str:
+        return f"LinearizedModel({self.nonlinear!r})"
+
+
 def _replace_arg(args: tuple, i: int, value: FloatArray) -> tuple:
     return args[:i] + (value,) + args[i + 1 :]
 

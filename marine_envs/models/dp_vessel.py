@@ -123,8 +123,13 @@ class DPVesselParams:
     def __post_init__(self) -> None:
         for name in ("L", "m", "g"):
             value = getattr(self, name)
-            require(isinstance(value, (int, float)) and math.isfinite(value) and value > 0,
-                    name, value, "must be a finite number > 0")
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                number = math.nan
+            require(math.isfinite(number) and number > 0, name, value,
+                    "must be a finite number > 0")
+            object.__setattr__(self, name, number)
         for name in ("Mbis", "Dbis"):
             object.__setattr__(self, name, _as_mat3(getattr(self, name), name))
         for name in ("T_b", "sigma_b", "w0", "lambda_", "sigma_eta", "tau_max"):

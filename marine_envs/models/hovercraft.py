@@ -244,46 +244,53 @@ class HovercraftModel(VehicleModel):
     def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
         """``x_dot`` (m/s^2, m/s^2, rad/s^2, m/s, m/s, rad/s) of MODELS.md 5.2; see the module
         docstring. Inputs are not clipped here: the environment applies :attr:`u_bounds`."""
+        wind = d is not None
         x, u, d = self._split(x, u, d)
         k = self._k
-        vel_u, vel_v, r, _, _, psi = np.moveaxis(x, -1, 0)
-        sigma_1, sigma_2, delta = np.moveaxis(u, -1, 0)
-        wind_n, wind_e = np.moveaxis(d, -1, 0)
+        # row-major (n_x, ...) copies: elementwise work on contiguous rows is twice as fast
+        vel_u, vel_v, r, _, _, psi = np.ascontiguousarray(np.moveaxis(x, -1, 0))
+        sigma_1, sigma_2, delta = np.ascontiguousarray(np.moveaxis(u, -1, 0))
         c, s = np.cos(psi), np.sin(psi)
-        ua = vel_u - (wind_n * c + wind_e * s)
-        va = vel_v - (-wind_n * s + wind_e * c)
-        uu, vv, rr, uv = vel_u * vel_u, vel_v * vel_v, r * r, vel_u * vel_v
-        vava = va * va
+        if wind:
+            wind_n, wind_e = np.moveaxis(d, -1, 0)
+            ua = vel_u - (wind_n * c + wind_e * s)
+            va = vel_v - (wind_e * c - wind_n * s)
+        else:
+            ua, va = vel_u, vel_v
+        abs_u = np.abs(vel_u)
+        vv, rr, uv = vel_v * vel_v, r * r, vel_u * vel_v
+        if wind:
+            abs_ua, vava, uava = np.abs(ua), va * va, ua * va
+        else:
+            abs_ua, vava, uava = abs_u, vv, uv
 
-        thrust_factor = k.T0 * (1.0 - ua / k.U_T)
+        thrust_factor = k.T0 - (k.T0 / k.U_T) * ua
         t1, t2 = sigma_1 * thrust_factor, sigma_2 * thrust_factor
+        # rudder dynamic pressure times n_R S_R: free stream plus k_s of the slipstream increment
         q = self._rudder * (ua * ua + self._disc * np.maximum(0.0, 0.5 * (t1 + t2)))
-        y_r = -k.C_R4 * delta * q
+        y_r = (-k.C_R4 * q) * delta
 
-        x_force = (k.X_Au * ua + k.X_Auu * ua * np.abs(ua) + k.X_Avv * vava + k.X_Auv * ua * va
-                   + k.X_Hu * vel_u + k.X_Huu * vel_u * np.abs(vel_u) + k.X_Hvv * vv
-                   + k.X_Huv * uv
+        x_force = ((k.X_Au + k.X_Auu * abs_ua) * ua + k.X_Avv * vava + k.X_Auv * uava
+                   + (k.X_Hu + k.X_Huu * abs_u) * vel_u + k.X_Hvv * vv + k.X_Huv * uv
                    + t1 + t2
-                   - (k.C_R1 + k.C_R2 * np.abs(delta) + k.C_R3 * delta * delta) * q
+                   - (k.C_R1 + (k.C_R2 + k.C_R3 * np.abs(delta)) * np.abs(delta)) * q
                    + k.m * vel_v * r)
-        y_force = (k.Y_Av * va + k.Y_Avv * va * np.abs(va) + k.Y_Auv * ua * va
-                   + k.Y_Hv * vel_v + k.Y_Hvv * vel_v * np.abs(vel_v) + k.Y_Huv * uv
+        y_force = ((k.Y_Av + k.Y_Avv * np.abs(va)) * va + k.Y_Auv * uava
+                   + (k.Y_Hv + k.Y_Hvv * np.abs(vel_v)) * vel_v + k.Y_Huv * uv
                    + y_r - k.m * vel_u * r)
-        n_moment = (k.N_Av * va + k.N_Ar * r
-                    + va * (k.N_Avvv * vava + k.N_Avvr * va * r + k.N_Avrr * rr)
-                    + k.N_Arrr * rr * r
-                    + k.N_Hv * vel_v + k.N_Hr * r
-                    + vel_v * (k.N_Hvvv * vv + k.N_Hvvr * vel_v * r + k.N_Hvrr * rr)
-                    + k.N_Hrrr * rr * r
+        n_moment = ((k.N_Av + k.N_Avvv * vava + k.N_Avvr * va * r + k.N_Avrr * rr) * va
+                    + (k.N_Hv + k.N_Hvvv * vv + k.N_Hvvr * vel_v * r + k.N_Hvrr * rr) * vel_v
+                    + (k.N_Ar + k.N_Hr + (k.N_Arrr + k.N_Hrrr) * rr) * r
                     + k.x_R * y_r + k.y_P * (t1 - t2))
         if k.N_Hbeta:  # atan2 is the costliest term and its default coefficient is 0
             n_moment = n_moment + k.N_Hbeta * np.arctan2(-vel_v, vel_u)
 
         i22, i23, i32, i33 = self._inv_m
-        u_dot = x_force * self._inv_m11
-        v_dot = i22 * y_force + i23 * n_moment
-        r_dot = i32 * y_force + i33 * n_moment
-        north_dot = vel_u * c - vel_v * s
-        east_dot = vel_u * s + vel_v * c
-        return np.stack(np.broadcast_arrays(u_dot, v_dot, r_dot, north_dot, east_dot, r),
-                        axis=-1)
+        out = np.empty(np.broadcast_shapes(x.shape[:-1], u.shape[:-1], d.shape[:-1]) + (6,))
+        out[..., 0] = x_force * self._inv_m11
+        out[..., 1] = i22 * y_force + i23 * n_moment
+        out[..., 2] = i32 * y_force + i33 * n_moment
+        out[..., 3] = vel_u * c - vel_v * s
+        out[..., 4] = vel_u * s + vel_v * c
+        out[..., 5] = r
+        return out

@@ -63,7 +63,8 @@ class HydrofoilParams:
     J: float = 14.35  #: pitch moment of inertia J_yy, kg m^2  [SEED]
     g: float = 9.80  #: gravity, m/s^2  [SEED: the seed uses 9.80]
     rho: float = 1025.0  #: seawater density, kg/m^3  [global convention]
-    l: float = 2.0  #: strut ("connecting rod") length: foils sit l below the CG, m  [SEED; RECON]
+    #: strut ("connecting rod") length: the foils sit l below the CG, m  [SEED; RECON reading]
+    l: float = 2.0  # noqa: E741 (MODELS.md symbol)
     l1: float = 0.2  #: front foil ahead of the CG, m  [SEED]
     l2: float = 1.0  #: rear foil behind the CG, m  [SEED]
     l3: float = 1.9  #: thrust line below the CG, m  [SEED]
@@ -181,16 +182,17 @@ class HydrofoilModel(VehicleModel):
         super().__init__(HydrofoilParams() if params is None else params)
         p = self.params
         # constants of rhs, precomputed: it runs 4x per control step on large batches
-        self._x = p.foil_x
-        self._inv_c = 1 / p.chord
-        self._a = p.lift_curve_slope
-        self._qS = 0.5 * p.rho * p.area  # dynamic pressure per U^2 times area, kg/m
-        self._induced = 1 / (np.pi * p.aspect_ratio)
+        (self._x1, self._x2), (self._a1, self._a2) = p.foil_x, p.lift_curve_slope
+        self._half_a1, self._half_a2 = self._a1 / 2, self._a2 / 2
+        self._k1, self._k2 = 8 / p.chord**2  # 16 r^2 / 2 with r = h/c, 1/m^2
+        self._qS1, self._qS2 = 0.5 * p.rho * p.area  # dynamic pressure per U^2 x area, kg/m
+        self._induced1, self._induced2 = 1 / (np.pi * p.aspect_ratio)
         self._strut = 0.5 * p.rho * p.U**2 * p.CDs * p.cs  # strut drag per m of depth, N/m
         if p.added_mass:
             ma = p.foil_added_mass
-            mass = np.array([[p.m + ma.sum(), -(ma * self._x).sum()],
-                             [-(ma * self._x).sum(), p.J + (ma * self._x**2).sum()]])
+            xs = p.foil_x
+            mass = np.array([[p.m + ma.sum(), -(ma * xs).sum()],
+                             [-(ma * xs).sum(), p.J + (ma * xs**2).sum()]])
         else:
             mass = np.diag([p.m, p.J])
         # generalised forces [heave force (N), pitch moment (N m)] -> accelerations
@@ -223,27 +225,37 @@ class HydrofoilModel(VehicleModel):
 
     # -- dynamics ------------------------------------------------------------------------------
     def _forces(self, x: FloatArray, u: FloatArray, d: FloatArray, F: float | FloatArray):
-        """Heave force (N, down), pitch moment (N m, bow-up) and the pieces they are made of."""
+        """Heave force (N, down), pitch moment (N m, bow-up) and the pieces they are made of.
+
+        Written foil by foil on contiguous 1-D arrays: on a (1024, n) batch this is ~1.5x faster
+        than a trailing foil axis, whose broadcasts and strided slices dominate the cost.
+        """
         p = self.params
-        xi, theta = x[..., 0:1], x[..., 1:2]
-        xi_dot, theta_dot = x[..., 2:3], x[..., 3:4]
+        xi, theta, xi_dot, theta_dot = np.moveaxis(x, -1, 0).copy()
+        alpha_s1, alpha_s2 = np.moveaxis(u, -1, 0).copy()
+        zeta_dot_1, zeta_dot_2, eta_1, eta_2, u_w1, u_w2 = np.moveaxis(d, -1, 0).copy()
+        x1, x2 = self._x1, self._x2
         sin, cos = np.sin(theta), np.cos(theta)
-        # per-foil quantities on a trailing axis of length 2 [front, rear]
-        h = xi + p.l * cos - self._x * sin + d[..., 2:4]
-        U_i = p.U - d[..., 4:6]
-        alpha = theta + u + (xi_dot - self._x * theta_dot + d[..., 0:2]) / U_i
-        alpha = np.clip(alpha, -p.alpha_stall, p.alpha_stall)
-        r2 = 16 * (h * self._inv_c) ** 2
-        C_L = self._a * (1 - 1 / (2 + r2)) * alpha  # k(r) = (1 + 16r^2)/(2 + 16r^2)
-        q = np.where(h > 0, self._qS * U_i**2, 0.0)  # a broached foil carries nothing
-        L = q * C_L
-        D = q * (p.CD0 + C_L**2 * self._induced)
-        f = self._strut * np.maximum(0.5 * (h[..., 0] + h[..., 1]), 0.0)
-        sin = sin[..., 0]
-        heave = p.m * p.g - (L[..., 0] + L[..., 1]) - F * sin
-        pitch = (p.l1 * L[..., 0] - p.l2 * L[..., 1] + p.l3 * F
-                 - p.l * (D[..., 0] + D[..., 1]) - p.l4 * f)
-        return heave, pitch, L, C_L, D, f, h
+        depth = xi + p.l * cos
+        h1 = depth - x1 * sin + eta_1
+        h2 = depth - x2 * sin + eta_2
+        U1, U2 = p.U - u_w1, p.U - u_w2
+        alpha_1 = np.clip((xi_dot - x1 * theta_dot + zeta_dot_1) / U1 + theta + alpha_s1,
+                          -p.alpha_stall, p.alpha_stall)
+        alpha_2 = np.clip((xi_dot - x2 * theta_dot + zeta_dot_2) / U2 + theta + alpha_s2,
+                          -p.alpha_stall, p.alpha_stall)
+        # a*k(h/c) = a - (a/2)/(1 + 8 (h/c)^2), the same k(r) = (1 + 16r^2)/(2 + 16r^2)
+        C_L1 = (self._a1 - self._half_a1 / (1 + self._k1 * h1 * h1)) * alpha_1
+        C_L2 = (self._a2 - self._half_a2 / (1 + self._k2 * h2 * h2)) * alpha_2
+        q1 = self._qS1 * U1 * U1 * (h1 > 0)  # a broached foil (h <= 0) carries nothing
+        q2 = self._qS2 * U2 * U2 * (h2 > 0)
+        L1, L2 = q1 * C_L1, q2 * C_L2
+        D1 = q1 * (p.CD0 + self._induced1 * C_L1 * C_L1)
+        D2 = q2 * (p.CD0 + self._induced2 * C_L2 * C_L2)
+        f = self._strut * np.maximum(0.5 * (h1 + h2), 0.0)
+        heave = p.m * p.g - (L1 + L2) - F * sin
+        pitch = p.l1 * L1 - p.l2 * L2 + p.l3 * F - p.l * (D1 + D2) - p.l4 * f
+        return heave, pitch, (L1, L2), (C_L1, C_L2), (D1, D2), f, (h1, h2)
 
     def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
         """Continuous-time state derivative (MODELS.md 2.3).
@@ -257,40 +269,44 @@ class HydrofoilModel(VehicleModel):
         """
         x, u, d = self._split(x, u, d)
         heave, pitch = self._forces(x, u, d, self._F0)[:2]
-        M = self._inv_mass
         if self.params.added_mass:
+            M = self._inv_mass
             xi_ddot = M[0, 0] * heave + M[0, 1] * pitch
             theta_ddot = M[1, 0] * heave + M[1, 1] * pitch
-        else:  # diagonal mass: skip the cross terms (and keep exact 1/m, 1/J scaling)
-            xi_ddot = heave * M[0, 0]
-            theta_ddot = pitch * M[1, 1]
+        else:
+            xi_ddot, theta_ddot = heave / self.params.m, pitch / self.params.J
         return np.stack(np.broadcast_arrays(x[..., 2], x[..., 3], xi_ddot, theta_ddot), axis=-1)
 
     # -- trim ----------------------------------------------------------------------------------
     def _solve_trim(self) -> HydrofoilTrim:
-        """Foil angles and thrust holding ``(xi0, theta0)`` in calm water at speed U."""
+        """Foil angles and thrust holding ``(xi0, theta0)`` in calm water at speed U.
+
+        Solves ``xi_ddot = theta_ddot = 0`` and ``F cos(theta0) = D_1 + D_2 + f`` for
+        ``(alpha_s1, alpha_s2, F)`` with :func:`scipy.optimize.fsolve`.
+        """
         p = self.params
         x0, d0 = self.x0, np.zeros(len(self.disturbance_names))
+        h = p.xi0 + p.l * math.cos(p.theta0) - p.foil_x * math.sin(p.theta0)
+        require(bool(np.all(h > 0)), "xi0", p.xi0,
+                f"must keep both foils submerged at trim (h = {h.tolist()} m)")
 
         def residual(z: FloatArray) -> FloatArray:
             heave, pitch, _, _, D, f, _ = self._forces(x0, z[:2], d0, z[2])
-            return np.array([heave, pitch, z[2] * math.cos(p.theta0) - D.sum() - f])
+            return np.array([heave, pitch, z[2] * math.cos(p.theta0) - D[0] - D[1] - f])
 
-        # guess: the weight split between the foils by moments, drag-free
+        # initial guess: the weight shared by the foils in inverse ratio of their arms, no drag
         share = np.array([p.l2, p.l1]) / (p.l1 + p.l2) if p.l1 + p.l2 > 0 else np.full(2, 0.5)
-        lift = p.m * p.g * share
-        guess_alpha = lift / (self._qS * p.U**2 * self._a) - p.theta0
-        z, _, ok, message = scipy.optimize.fsolve(
-            residual, np.append(guess_alpha, 0.1 * p.m * p.g), xtol=1e-13, full_output=True)
-        heave, pitch, L, C_L, D, f, h = self._forces(x0, z[:2], d0, z[2])
-        alpha = p.theta0 + z[:2]
+        qS = 0.5 * p.rho * p.U**2 * p.area
+        guess = np.append(p.m * p.g * share / (qS * p.lift_curve_slope) - p.theta0,
+                          0.1 * p.m * p.g)
+        z, _, ok, message = scipy.optimize.fsolve(residual, guess, xtol=1e-13, full_output=True)
         if ok != 1 or np.abs(residual(z)).max() > 1e-6 * p.m * p.g:
             raise ValueError(f"no trim found for these parameters ({message.strip()}): {p!r}")
-        require(bool(np.all(h > 0)), "xi0", p.xi0, f"must keep both foils submerged at trim "
-                f"(h = {h.tolist()} m)")
+        alpha = p.theta0 + z[:2]  # calm water, at rest: angle of attack = theta + alpha_s
         require(bool(np.all(np.abs(alpha) < p.alpha_stall)), "alpha_stall", p.alpha_stall,
                 f"must exceed the trim angles of attack {alpha.tolist()} rad")
         require(bool(np.all(np.abs(z[:2]) <= p.alpha_max)), "alpha_max", p.alpha_max,
                 f"must allow the trim foil angles {z[:2].tolist()} rad")
-        return HydrofoilTrim(alpha_s0=z[:2].copy(), F0=float(z[2]), L=L, C_L=C_L, D=D,
-                             f=float(f), h=h)
+        _, _, L, C_L, D, f, h = self._forces(x0, z[:2], d0, z[2])
+        return HydrofoilTrim(alpha_s0=z[:2].copy(), F0=float(z[2]), L=np.array(L),
+                             C_L=np.array(C_L), D=np.array(D), f=float(f), h=np.array(h))

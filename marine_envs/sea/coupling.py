@@ -50,7 +50,50 @@ class USVWaveCoupling:
         return np.stack([w_psi, w_phi], axis=1)
 
 
-_COUPLINGS = {"usv": USVWaveCoupling}
+@dataclasses.dataclass(frozen=True)
+class HydrofoilWaveCoupling:
+    """Orbital velocities and surface elevation at the hydrofoil's two foils (MODELS.md 2.5).
+
+    Deep-water linear waves **[RECALLED, standard]**, wave number ``k = omega^2/g``, foil i at
+    ``x_i`` along the hull (``x_1 = +l1`` front, ``x_2 = -l2`` rear, m) and at its trim depth
+    ``hbar_i`` (m, taken from the model's trim). Per metre of wave amplitude, with the phase
+    ``phi_i = omega_e t - k x_i cos(beta) + eps``::
+
+        eta_i      = cos(phi_i)                                      H = exp(-i k x_i cos b)
+        zeta_dot_i = -omega exp(-k hbar_i) sin(phi_i)                H = i omega exp(-k hbar_i) ...
+        u_w,i      = cos(b) omega exp(-k hbar_i) cos(phi_i)          H = cos(b) omega exp(...) ...
+
+    ``zeta_dot`` (upward, m/s) and ``u_w`` (along +x, m/s) are the particle velocities at a fixed
+    earth point, so their amplitude uses the wave frequency omega while the phase runs at the
+    encounter frequency. The decay uses the fixed trim depth, not the instantaneous one.
+    ``k`` uses the sea's gravity (9.81 m/s^2, as the realisation's encounter frequency does),
+    not the hydrofoil seed's 9.80: the waves belong to the sea, not to the craft.
+
+    :param heading: encounter angle beta, rad (Fossen: pi = head seas, 0 = following seas).
+    :param rich: False (the seed's model, MODELS.md 2.4): only the ``zeta_dot`` channels, the
+        ``eta`` and ``u_w`` columns are zero. True: all six channels (the "richer truth model").
+    """
+
+    heading: float
+    rich: bool = False
+
+    def __call__(self, omega: NDArray[np.float64], model: VehicleModel) -> NDArray[np.complex128]:
+        omega = np.asarray(omega, dtype=float)[:, None]
+        k = omega**2 / G
+        x = model.params.foil_x[None, :]  # [+l1, -l2], m
+        hbar = model.trim.h[None, :]  # trim submergence of each foil, m
+        cos_beta = math.cos(self.heading)
+        travel = np.exp(-1j * k * x * cos_beta)  # phase lag of the wave between the foils
+        orbital = omega * np.exp(-k * hbar) * travel  # orbital speed at depth, m/s per m
+        out = np.zeros((omega.shape[0], 6), dtype=complex)
+        out[:, 0:2] = 1j * orbital
+        if self.rich:
+            out[:, 2:4] = travel
+            out[:, 4:6] = cos_beta * orbital
+        return out
+
+
+_COUPLINGS = {"usv": USVWaveCoupling, "hydrofoil": HydrofoilWaveCoupling}
 
 
 def wave_coupling(model: VehicleModel, heading: float, **options: float) -> Coupling:
