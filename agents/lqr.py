@@ -78,7 +78,13 @@ class LQRPolicy:
         """
         sim = env.unwrapped.sim
         A, B, _ = sim.model.linearize(sim.task.x_ref, sim.task.u_ref)
-        K = lqr_gain(A, B, np.diag(sim.task.q), np.diag(sim.task.r), dt=sim.dt)
+        # states that are not weighed and drive nothing (e.g. a position when only the heading
+        # matters) are left out: kept, their undamped modes would make the Riccati equation
+        # unsolvable, and the gain on them would be zero anyway
+        keep = np.flatnonzero((sim.task.q > 0) | np.any(A != 0, axis=0))
+        K = np.zeros((B.shape[1], A.shape[0]))
+        K[:, keep] = lqr_gain(A[np.ix_(keep, keep)], B[keep], np.diag(sim.task.q[keep]),
+                              np.diag(sim.task.r), dt=sim.dt)
         idx = None
         if observed == "sensors":
             missing = sorted(set(sim.sensors.channels) - set(sim.model.state_names))

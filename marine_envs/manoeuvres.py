@@ -114,12 +114,16 @@ class ZigzagRudder:
               initial_rudder: ArrayLike = 0.0) -> None:
         """Start the test for boats ``idx`` (index, slice, mask or ``None`` = all).
 
-        :param initial_heading: heading at the first execute, rad (scalar or one per boat).
+        :param initial_heading: heading at the first execute, rad: a scalar, one per selected boat
+            or one per boat of the batch.
         :param initial_rudder: rudder angle before the execute, rad; used only with a rate limit
             (without one the rudder is at ``first_direction * A`` at once).
         """
         sel = slice(None) if idx is None else idx
-        self.initial_heading[sel] = initial_heading
+        heading = np.asarray(initial_heading, dtype=float)
+        if idx is not None and heading.shape == (self.batch_size,):
+            heading = heading[idx]  # one heading per boat of the whole batch: take the selected
+        self.initial_heading[sel] = heading
         self.direction[sel] = self.first_direction
         self.reversals[sel] = 0
         if self.rudder_rate is None:
@@ -179,13 +183,33 @@ def _initial(model: VehicleModel, speed: ArrayLike | None, inputs: ArrayLike | N
     return x, u
 
 
-def _simulate(model: VehicleModel, x: FloatArray, u: FloatArray, dt: float, steps: int,
-              command: Callable[[FloatArray, float], FloatArray], rudder_index: int,
-              stop: Callable[[], bool] | None = None) -> tuple[FloatArray, FloatArray]:
-    """RK4 with the inputs held over each step; the rudder column is set by ``command(x, t)`` at
-    the start of every step. Returns states (T, n, n_x) and rudder angles (T, n)."""
+def _disturbance(model: VehicleModel, disturbance: ArrayLike | None, n: int) -> FloatArray | None:
+    if disturbance is None:
+        return None
+    n_d = len(model.disturbance_names)
+    d = np.asarray(disturbance, dtype=float)
+    try:
+        d = np.broadcast_to(d, (n, n_d))
+    except ValueError:
+        raise ValueError(f"disturbance has shape {d.shape}; need ({n_d},) or ({n}, {n_d}) "
+                         f"({', '.join(model.disturbance_names)})") from None
+    if not np.all(np.isfinite(d)):
+        raise ValueError(f"disturbance={disturbance!r} is invalid: must be finite")
+    return d
+
+
+def _simulate(model: VehicleModel, x: FloatArray, u: FloatArray, d: FloatArray | None,
+              dt: float, steps: int, command: Callable[[FloatArray, float], FloatArray],
+              rudder_index: int, stop: Callable[[], bool] | None = None
+              ) -> tuple[FloatArray, FloatArray]:
+    """RK4 with the inputs and disturbances held over each step; the rudder column is set by
+    ``command(x, t)`` at the start of every step. Returns states (T, n, n_x) and rudder angles
+    (T, n)."""
     states, rudders = [x], []
-    f = model.rhs
+
+    def f(x: FloatArray, u: FloatArray) -> FloatArray:
+        return model.rhs(x, u, d)
+
     for i in range(steps):
         u = u.copy()
         u[:, rudder_index] = command(x, i * dt)
@@ -302,7 +326,8 @@ def zigzag(model: VehicleModel, amplitude: ArrayLike, switch: ArrayLike,
            speed: ArrayLike | None = None, duration: float | None = None, dt: float = 0.05,
            inputs: ArrayLike | None = None, *, first_direction: int = 1,
            rudder_rate: float | None = None, rudder_index: int | None = None,
-           heading_index: int | None = None, max_duration: float = 600.0) -> ZigzagResult:
+           heading_index: int | None = None, max_duration: float = 600.0,
+           disturbance: ArrayLike | None = None) -> ZigzagResult:
     """Zig-zag test A/B of ``model`` by fixed-step RK4 (see the module docstring).
 
     :param model: any vehicle model with a rudder input and a heading state.
@@ -318,8 +343,12 @@ def zigzag(model: VehicleModel, amplitude: ArrayLike, switch: ArrayLike,
     :param rudder_rate: rudder rate limit, rad/s; ``None`` = instantaneous.
     :param rudder_index: input column of the rudder (default: found by name, ``delta``).
     :param heading_index: state column of the heading (default: ``psi``).
+    :param max_duration: cap on the run length when ``duration`` is None, s.
+    :param disturbance: constant disturbance, shape ``(n_d,)`` or ``(n, n_d)`` (model units,
+        e.g. the hovercraft's wind); default zero.
     """
     _check_dt(dt, duration)
+    _check_dt(dt, max_duration)
     i_rud = _index(model.input_names, RUDDER_NAMES, rudder_index, "rudder", model)
     i_psi = _index(model.state_names, HEADING_NAMES, heading_index, "heading", model)
     n, scalar = _batch(amplitude, switch, speed)
@@ -340,7 +369,8 @@ def zigzag(model: VehicleModel, amplitude: ArrayLike, switch: ArrayLike,
         stop = lambda: bool(np.all(law.reversals >= 3))  # noqa: E731
     else:
         steps, stop = int(round(duration / dt)), None
-    states, rudder = _simulate(model, x, u, dt, steps, command, i_rud, stop)
+    d = _disturbance(model, disturbance, n)
+    states, rudder = _simulate(model, x, u, d, dt, steps, command, i_rud, stop)
     time = np.arange(states.shape[0]) * dt
     change = np.unwrap(states[:, :, i_psi], axis=0) - states[0, :, i_psi]
     flips = np.array(reversal_steps)  # (T-1, n): True where a reversal was commanded
@@ -428,7 +458,8 @@ def _at_heading(change: FloatArray, values: FloatArray, target: float) -> float:
 def turning_circle(model: VehicleModel, rudder: ArrayLike, speed: ArrayLike | None = None,
                    duration: float = 300.0, dt: float = 0.05, inputs: ArrayLike | None = None,
                    *, rudder_index: int | None = None,
-                   heading_index: int | None = None) -> TurningResult:
+                   heading_index: int | None = None,
+                   disturbance: ArrayLike | None = None) -> TurningResult:
     """Turning-circle test: the rudder held at ``rudder`` from steady straight running.
 
     :param model: a vehicle model with a rudder input and states ``u``, ``v``, ``r`` and ``psi``
@@ -439,6 +470,10 @@ def turning_circle(model: VehicleModel, rudder: ArrayLike, speed: ArrayLike | No
     :param dt: RK4 step, s.
     :param inputs: all inputs held during the test except the rudder (model units); default the
         trim inputs at ``speed``. E.g. full pitch for a turn at full power.
+    :param rudder_index: input column of the rudder (default: found by name, ``delta``).
+    :param heading_index: state column of the heading (default: ``psi``).
+    :param disturbance: constant disturbance, shape ``(n_d,)`` or ``(n, n_d)`` (model units);
+        default zero.
     """
     _check_dt(dt, duration)
     i_rud = _index(model.input_names, RUDDER_NAMES, rudder_index, "rudder", model)
@@ -453,7 +488,9 @@ def turning_circle(model: VehicleModel, rudder: ArrayLike, speed: ArrayLike | No
     delta = np.broadcast_to(np.asarray(rudder, dtype=float), (n,)).copy()
     if not np.all(np.isfinite(delta)):
         raise ValueError(f"rudder={rudder!r} is invalid: must be finite (rad)")
-    states, _ = _simulate(model, x, u, dt, int(round(duration / dt)), lambda s, t: delta, i_rud)
+    d = _disturbance(model, disturbance, n)
+    states, _ = _simulate(model, x, u, d, dt, int(round(duration / dt)), lambda s, t: delta,
+                          i_rud)
     time = np.arange(states.shape[0]) * dt
     psi = states[:, :, i_psi]
     if "north" in names and "east" in names:

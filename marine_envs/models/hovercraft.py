@@ -59,11 +59,11 @@ _DERIVED = ("Iz", "X_ud", "Y_vd", "N_rd", "N_vd")
 class HovercraftParams:
     """Parameters of the hovercraft model; names are MODELS.md 5.3's symbols. SI units, radians.
 
-    Derived defaults: ``Iz``, ``X_ud``, ``Y_vd``, ``N_rd`` and ``N_vd`` default to ``None``, meaning
-    "derived from the mass and size": ``Iz = m (L^2 + B^2)/12``, ``X_ud = -0.02 m``,
-    ``Y_vd = -0.05 m``, ``N_rd = -0.05 Iz``, ``N_vd = 0``. They stay ``None`` in the dataclass so that
-    a variant with another ``m`` (``dataclasses.replace(p, m=1.8e5)``) re-derives them; give a number
-    to override. :meth:`resolved` returns a copy with the numbers filled in.
+    Derived defaults: ``Iz``, ``X_ud``, ``Y_vd``, ``N_rd`` and ``N_vd`` default to ``None``,
+    meaning "derived from the mass and size": ``Iz = m (L^2 + B^2)/12``, ``X_ud = -0.02 m``,
+    ``Y_vd = -0.05 m``, ``N_rd = -0.05 Iz``, ``N_vd = 0``. They stay ``None`` in the dataclass so
+    that a variant with another ``m`` (``dataclasses.replace(p, m=1.8e5)``) re-derives them; give
+    a number to override. :meth:`resolved` returns a copy with the numbers filled in.
     """
 
     # rigid body and added mass
@@ -190,6 +190,7 @@ class HovercraftModel(VehicleModel):
         self._inv_m = (m33 / det, -m23 / det, -m32 / det, m22 / det)
         self._disc = k.k_s * 2.0 / (k.rho_a * math.pi * k.D_p**2 / 4.0)  # V_R^2 per N of Tbar
         self._rudder = k.n_R * k.S_R * 0.5 * k.rho_a  # force per (coefficient * V_R^2)
+        self._sigma0: float | None = None  # trim pitch at u_cruise, computed on first use
 
     # -- nominal operating point -------------------------------------------------------------
     @property
@@ -199,9 +200,10 @@ class HovercraftModel(VehicleModel):
 
     @property
     def u0(self) -> FloatArray:
-        """Trim pitch on both propellers at the cruise speed, rudder amidships."""
-        sigma = self.trim_pitch(self.params.u_cruise)
-        return np.array([sigma, sigma, 0.0])
+        """Trim pitch on both propellers at the cruise speed (0.598 nominal), rudder amidships."""
+        if self._sigma0 is None:
+            self._sigma0 = self.trim_pitch(self.params.u_cruise)
+        return np.array([self._sigma0, self._sigma0, 0.0])
 
     def trim_point(self, speed: float) -> tuple[FloatArray, FloatArray]:
         """State and input ``(x, u)`` of straight running at ``speed`` (m/s), zero wind."""
