@@ -11,16 +11,16 @@ from gymnasium.envs.registration import register
 
 __version__ = "0.1.0"
 
-#: Registered environment ids -> (module of the environment, class name prefix).
+#: Registered environment ids -> (module in marine_envs.envs, class name prefix, episode steps).
 ENVIRONMENTS = {
-    "marine_envs/USV-v0": ("usv", "USV"),
-    "marine_envs/Hydrofoil-v0": ("hydrofoil", "Hydrofoil"),
-    "marine_envs/ROV-v0": ("rov", "ROV"),
-    "marine_envs/DPVessel-v0": ("dp_vessel", "DPVessel"),
-    "marine_envs/Hovercraft-v0": ("hovercraft", "Hovercraft"),
+    "marine_envs/USV-v0": ("usv", "USV", 1000),
+    "marine_envs/Hydrofoil-v0": ("hydrofoil", "Hydrofoil", 12000),
+    "marine_envs/ROV-v0": ("rov", "ROV", 1000),
+    "marine_envs/DPVessel-v0": ("dp_vessel", "DPVessel", 1000),
+    "marine_envs/Hovercraft-v0": ("hovercraft", "Hovercraft", 1000),
 }
 
-for _id, (_module, _prefix) in ENVIRONMENTS.items():
+for _id, (_module, _prefix, _steps) in ENVIRONMENTS.items():
     register(id=_id, entry_point=f"marine_envs.envs.{_module}:{_prefix}Env",
              vector_entry_point=f"marine_envs.envs.{_module}:{_prefix}VectorEnv",
-             max_episode_steps=1000)
+             max_episode_steps=_steps)

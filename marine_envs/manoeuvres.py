@@ -76,13 +76,15 @@ class ZigzagRudder:
     :param switch: heading change B at which the rudder reverses, rad (> 0); scalar or per boat.
     :param batch_size: number of boats.
     :param first_direction: +1 (default, starboard first as ITTC) or -1 (port first).
+    :param turn_sign: +1 (default) when a positive rudder turns the heading positive (SNAME
+        convention, e.g. the hovercraft), -1 for models with the opposite sign (the USV seed).
     :param rudder_rate: rudder rate limit, rad/s; ``None`` (default) moves it instantaneously.
     :param rudder_index: position of the rudder in the input vector, for :meth:`apply`.
     :param heading_index: position of the heading in the state vector, for :meth:`apply`.
     """
 
     def __init__(self, amplitude: ArrayLike, switch: ArrayLike, batch_size: int = 1, *,
-                 first_direction: int = 1, rudder_rate: float | None = None,
+                 first_direction: int = 1, turn_sign: int = 1, rudder_rate: float | None = None,
                  rudder_index: int | None = None, heading_index: int | None = None) -> None:
         if not (isinstance(batch_size, (int, np.integer)) and batch_size >= 1):
             raise ValueError(f"batch_size={batch_size!r} is invalid: must be an integer >= 1")
@@ -99,9 +101,11 @@ class ZigzagRudder:
             setattr(self, name, arr)
         if first_direction not in (1, -1):
             raise ValueError(f"first_direction={first_direction!r} is invalid: +1 or -1")
+        if turn_sign not in (1, -1):
+            raise ValueError(f"turn_sign={turn_sign!r} is invalid: +1 or -1")
         if rudder_rate is not None and not (math.isfinite(rudder_rate) and rudder_rate > 0):
             raise ValueError(f"rudder_rate={rudder_rate!r} is invalid: must be > 0 rad/s or None")
-        self.first_direction = first_direction
+        self.first_direction, self.turn_sign = first_direction, turn_sign
         self.rudder_rate = rudder_rate
         self.rudder_index, self.heading_index = rudder_index, heading_index
         self.initial_heading = np.zeros(self.batch_size)
@@ -121,7 +125,8 @@ class ZigzagRudder:
         """
         sel = slice(None) if idx is None else idx
         heading = np.asarray(initial_heading, dtype=float)
-        if idx is not None and heading.shape == (self.batch_size,):
+        n_selected = self.initial_heading[sel].size
+        if heading.shape == (self.batch_size,) and n_selected != self.batch_size:
             heading = heading[idx]  # one heading per boat of the whole batch: take the selected
         self.initial_heading[sel] = heading
         self.direction[sel] = self.first_direction
@@ -141,7 +146,8 @@ class ZigzagRudder:
         :param dt: time since the previous call, s; needed only with a rudder rate limit.
         """
         change = self.heading_change(heading)
-        reverse = self.direction * change >= self.switch
+        # the rudder reverses once the heading has turned B the way the rudder drives it
+        reverse = (self.turn_sign * self.direction) * change >= self.switch
         self.direction = np.where(reverse, -self.direction, self.direction)
         self.reversals += reverse
         target = self.direction * self.amplitude
@@ -179,7 +185,12 @@ def _initial(model: VehicleModel, speed: ArrayLike | None, inputs: ArrayLike | N
         x = np.array([p[0] for p in points])
         u = np.array([p[1] for p in points])
     if inputs is not None:
-        u = np.array(np.broadcast_to(np.asarray(inputs, dtype=float), u.shape))
+        given = np.asarray(inputs, dtype=float)
+        try:
+            u = np.array(np.broadcast_to(given, u.shape))
+        except ValueError:
+            raise ValueError(f"inputs has shape {given.shape}; need ({u.shape[1]},) or "
+                             f"{u.shape} ({', '.join(model.input_names)})") from None
     return x, u
 
 
@@ -324,7 +335,7 @@ def _peak(change: FloatArray, start: int, end: int | None, sign: float) -> tuple
 
 def zigzag(model: VehicleModel, amplitude: ArrayLike, switch: ArrayLike,
            speed: ArrayLike | None = None, duration: float | None = None, dt: float = 0.05,
-           inputs: ArrayLike | None = None, *, first_direction: int = 1,
+           inputs: ArrayLike | None = None, *, first_direction: int = 1, turn_sign: int = 1,
            rudder_rate: float | None = None, rudder_index: int | None = None,
            heading_index: int | None = None, max_duration: float = 600.0,
            disturbance: ArrayLike | None = None) -> ZigzagResult:
@@ -340,6 +351,8 @@ def zigzag(model: VehicleModel, amplitude: ArrayLike, switch: ArrayLike,
     :param inputs: all inputs held during the test except the rudder (model units); default the
         trim inputs at ``speed``.
     :param first_direction: +1 starboard first (ITTC), -1 port first.
+    :param turn_sign: +1 when a positive rudder turns the heading positive, else -1 (the
+        overshoots are then measured the way the heading actually turns).
     :param rudder_rate: rudder rate limit, rad/s; ``None`` = instantaneous.
     :param rudder_index: input column of the rudder (default: found by name, ``delta``).
     :param heading_index: state column of the heading (default: ``psi``).
@@ -354,7 +367,7 @@ def zigzag(model: VehicleModel, amplitude: ArrayLike, switch: ArrayLike,
     n, scalar = _batch(amplitude, switch, speed)
     x, u = _initial(model, speed, inputs, n)
     law = ZigzagRudder(amplitude, switch, n, first_direction=first_direction,
-                       rudder_rate=rudder_rate)
+                       turn_sign=turn_sign, rudder_rate=rudder_rate)
     law.reset(initial_heading=x[:, i_psi], initial_rudder=u[:, i_rud])
     reversal_steps: list[FloatArray] = []
 
@@ -382,7 +395,7 @@ def zigzag(model: VehicleModel, amplitude: ArrayLike, switch: ArrayLike,
         b = float(law.switch[j])
         steps_j = np.flatnonzero(flips[:, j])
         ends = list(steps_j[1:3]) + [None] * (3 - len(steps_j[1:3]))
-        s1 = first_direction
+        s1 = first_direction * turn_sign  # sign of the first heading change
         if steps_j.size:
             p1, i1 = _peak(change[:, j], int(steps_j[0]), ends[0], s1)
         else:

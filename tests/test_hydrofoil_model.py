@@ -211,7 +211,7 @@ def test_parameters_that_cannot_trim_raise():
         get_model("hydrofoil", xi0=-3.0)
     with pytest.raises(ValueError, match="alpha_max"):  # trim foil angle beyond the limit
         get_model("hydrofoil", alpha_max=math.radians(2.0))
-    with pytest.raises(ValueError):  # far too slow to fly
+    with pytest.raises(ValueError, match="U=1.0"):  # far too slow to fly
         get_model("hydrofoil", U=1.0)
 
 

@@ -137,19 +137,22 @@ class HydrofoilParams:
     @property
     def foil_added_mass(self) -> FloatArray:
         """Heave added mass ``rho*pi*(c/2)^2*b*AR/(1+AR)`` of each foil, kg  [PROPOSED formula]."""
-        ar = self.aspect_ratio
-        return self.rho * np.pi * (self.chord / 2) ** 2 * self.area / self.chord * ar / (1 + ar)
+        ar, span = self.aspect_ratio, np.array([self.span1, self.span2])
+        return self.rho * np.pi * (self.chord / 2) ** 2 * span * ar / (1 + ar)
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class HydrofoilTrim:
-    """The trim (equilibrium) at ``(xi0, theta0)``, speed U, calm water. Arrays are
-    [front, rear].
+    """The trim (equilibrium) at ``(xi0, theta0)``, speed U, calm water (MODELS.md 2.3).
+    Arrays are [front, rear].
 
     :param alpha_s0: foil angles, rad.
     :param F0: thrust, N.
-    :param L: lift, N.   :param C_L: lift coefficient, -.   :param D: foil drag, N.
-    :param f: strut drag, N.   :param h: foil submergence, m.
+    :param L: lift, N.
+    :param C_L: lift coefficient, -.
+    :param D: foil drag, N.
+    :param f: strut drag, N.
+    :param h: foil submergence, m.
     """
 
     alpha_s0: FloatArray
@@ -166,6 +169,8 @@ class HydrofoilModel(VehicleModel):
 
     :param params: :class:`HydrofoilParams`; ``None`` for the nominal (seed) craft.
     :raises ValueError: the parameters admit no trim with both foils submerged and unstalled.
+
+    :ivar trim: the :class:`HydrofoilTrim`, solved at construction.
     """
 
     name: ClassVar[str] = "hydrofoil"
@@ -301,7 +306,10 @@ class HydrofoilModel(VehicleModel):
                           0.1 * p.m * p.g)
         z, _, ok, message = scipy.optimize.fsolve(residual, guess, xtol=1e-13, full_output=True)
         if ok != 1 or np.abs(residual(z)).max() > 1e-6 * p.m * p.g:
-            raise ValueError(f"no trim found for these parameters ({message.strip()}): {p!r}")
+            # usually the foils stall before they carry the weight: too slow, small or heavy
+            raise ValueError(f"no trim found for U={p.U!r} m/s, m={p.m!r} kg, alpha_stall="
+                             f"{p.alpha_stall!r} rad: the unstalled foils cannot hold (xi0, "
+                             f"theta0) ({' '.join(message.split())})")
         alpha = p.theta0 + z[:2]  # calm water, at rest: angle of attack = theta + alpha_s
         require(bool(np.all(np.abs(alpha) < p.alpha_stall)), "alpha_stall", p.alpha_stall,
                 f"must exceed the trim angles of attack {alpha.tolist()} rad")

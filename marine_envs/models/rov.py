@@ -8,6 +8,7 @@ M N]``: generalised forces at the CB (N, N m). ``d = [current_n current_e curren
 constant, irrotational ocean current in NED (m/s) and the morph command (-). MODELS.md 3.2::
 
     (M_RB(s) + M_A) nu_dot = -C_RB(nu, s) nu + tau_hyd(nu_r, s) + tau_s(eta, s) + tau
+                             - M_A [w x nu_c; 0]          (current only, see "Current")
     eta_dot = J(eta) nu                     (ZYX Euler kinematics, NED position from nu)
     s_dot   = (s_cmd - s) / T_m
 
@@ -31,12 +32,14 @@ constant, irrotational ocean current in NED (m/s) and the morph command (-). MOD
     Y_s =  (W-B) cos(theta) sin(phi) M_s = -g_z sin(theta) - g_x cos(theta) cos(phi)
     Z_s =  (W-B) cos(theta) cos(phi) N_s =  g_x cos(theta) sin(phi) + g_y sin(theta)
 
-**Current.** ``nu_r = nu - [R(eta)^T v_c; 0 0 0]`` with ``v_c`` the NED current: the
-hydrodynamic terms act on the velocity relative to the water, the rigid-body Coriolis terms and
-the kinematics on ``nu`` (velocity over ground). Approximation (documented choice): the current is
-constant and irrotational, and the added-mass inertia multiplies ``nu_dot`` instead of
-``nu_r_dot = nu_dot + w x nu_c``; the neglected force is ``M_A (w x nu_c)``, small for slow
-currents and turn rates, and zero without current.
+**Current.** ``nu_r = nu - [nu_c; 0 0 0]``, ``nu_c = R(eta)^T v_c`` with ``v_c`` the NED current,
+assumed constant and irrotational. The hydrodynamic terms act on the velocity through the water
+``nu_r``; the rigid-body terms and the kinematics on ``nu`` (velocity over ground). The added-mass
+inertia accelerates the water-relative motion, ``M_A nu_r_dot = M_A nu_dot + M_A [w x nu_c; 0]``
+(``nu_c_dot = -w x nu_c``), which is Fossen's relative-velocity form, exact for such a current
+(``current_inertia="relative"``, the default). The simpler approximation ``M_A nu_dot``
+(``current_inertia="ground"``) drops the force ``-M_A [w x nu_c; 0]``; it is not energy-consistent:
+a drifting boat that turns in the current gains relative speed again instead of settling.
 
 **Morph** [PROPOSED, MODELS.md 3.4]. Every quadratic coefficient that the deployed arm changes,
 ``r_G``, ``r_B`` and ``I_b`` are interpolated as ``theta(s) = theta_c + s (theta_w - theta_c)``;
@@ -48,23 +51,32 @@ flooded bay (MODELS.md 3.4) is not modelled.
 [PROPOSED] six-thruster layout of MODELS.md 3.5 (:data:`THRUSTER_ALLOCATION`, :func:`allocate`)
 gives the bounds of X, Y, Z, M and N (the box of each row's reachable range; the jointly reachable
 set is smaller, e.g. X and N share the stern thrusters). Its roll row is zero, so K gets a small
-[PROPOSED] idealised range +-K_max; with thrusters only, roll is passively stable through BG.
+[PROPOSED] idealised range +-K_max; with thrusters only, roll is left to the BG pendulum.
 In work shape the bow-down moment ``x_G W - x_B B = 11.3 N m`` exceeds the thrusters' pitch range
 (7.5 N m): holding the work-shape boat level needs the seed's variable-structure device.
 
-**Implementation.** ``rhs`` is written for batches: the right-hand side is linear in a feature
-matrix ``F`` of products (``u|u|``, ``w q``, ``sin(theta)``, ``tau``, ...) and, for the morph, of
-the same features times ``s``, so ``tau_total = [F, s F] @ [C_cruise; C_work - C_cruise]`` is one
-GEMM. ``M(s) = M_0 + s (M_1 - M_0)`` is inverted exactly for every ``s`` from the generalised
-eigen-decomposition ``(M_1 - M_0) V = M_0 V diag(lam)``, ``V^T M_0 V = I``:
-``M(s)^-1 = V diag(1 / (1 + s lam)) V^T``; it is folded into the coefficient matrix.
+**Stability (a property of the cited coefficients, not of this code).** Prestero's damping of
+roll and pitch is quadratic, so at hover the BG pendulums (about 5.6 and 0.85 rad/s in cruise) are
+undamped to first order. Under way, the Munk moments of the streamlined hull dominate: with
+``Nuv < 0`` the vehicle is directionally unstable at every forward speed, and with ``Muw > 0``
+pitch is unstable above 0.60 m/s (0.84 m/s in work shape; at 1.5 m/s: pitch eigenvalues
+0.42 +- 0.22j 1/s, yaw divergence +1.0 1/s), while roll stays stable. REMUS flies under autopilot; DSTO's listing adds
+Fodrea's revised linear coefficients (Mw = -9.3, Nv = -4.47), which MODELS.md does not use.
+
+**Implementation.** ``rhs`` is written for batches (one contiguous row per state): the forces are
+linear in a feature matrix ``F`` of products (``u|u|``, ``w q``, ``sin(theta)``, ``tau``, ...),
+``tau_total = C_0^T F + s dC^T F_morph``. ``M(s) = M_0 + s dM`` is inverted exactly for every
+``s`` through the generalised eigen-decomposition ``dM V = M_0 V diag(lam)``, ``V^T M_0 V = I``:
+``M(s)^-1 = V diag(1 / (1 + s lam)) V^T``. With ``V^T`` folded into the coefficients, ``nu_dot``
+costs two small GEMMs, a scaling and a 6x6 product (one GEMM when the whole batch is in cruise
+shape). A single boat takes a path on Python floats with the same feature layout.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from typing import ClassVar
+from typing import ClassVar, Literal
 
 import numpy as np
 import scipy.linalg
@@ -136,7 +148,8 @@ class ROVParams:
     m: float = 30.48  #: mass, kg  [CITED]
     W: float = 299.0  #: weight, N  [CITED]
     B: float = 306.0  #: buoyancy, N  [CITED]
-    rho: float = 1030.0  #: water density, kg/m^3 [CITED]; provenance only: coefficients are dimensional
+    #: water density, kg/m^3 [CITED]; for the record only: the coefficients are dimensional
+    rho: float = 1030.0
     xG: float = 0.0  #: centre of gravity rel. CB, m  [CITED]
     yG: float = 0.0  #: m  [CITED]
     zG: float = 0.0196  #: m (below the CB)  [CITED]
@@ -211,12 +224,20 @@ class ROVParams:
     work_Izz: float = 5.042  #: kg m^2  [PROPOSED]
     # actuation
     K_max: float = 1.0  #: idealised roll-moment bound, N m  [PROPOSED: thrusters have none]
+    #: What the added-mass inertia accelerates in a current (see the module docstring):
+    #: "relative" (nu_r_dot, Fossen's exact form for a constant irrotational current) or
+    #: "ground" (nu_dot, the simpler approximation).
+    current_inertia: Literal["relative", "ground"] = "relative"
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
-            require(isinstance(value, (int, float)) and math.isfinite(value), f.name, value,
-                    "must be a finite number")
+            if f.name == "current_inertia":
+                require(value in ("relative", "ground"), f.name, value,
+                        "must be 'relative' or 'ground'")
+                continue
+            require(isinstance(value, (int, float)) and not isinstance(value, bool)
+                    and math.isfinite(value), f.name, value, "must be a finite number")
         positive = ("m", "W", "B", "rho", "T_m", "K_max", "Ixx", "Iyy", "Izz",
                     "work_Ixx", "work_Iyy", "work_Izz")
         for name in positive:
@@ -248,10 +269,15 @@ def mass_matrix(params: ROVParams, s: float = 0.0) -> FloatArray:
     k, c = params, params.shape_at(s)
     mS = k.m * _skew(np.array([c["xG"], c["yG"], c["zG"]]))
     rigid = np.block([[k.m * np.eye(3), -mS], [mS, np.diag([c["Ixx"], c["Iyy"], c["Izz"]])]])
-    added = -np.array([[k.Xud, 0, 0, 0, 0, 0], [0, k.Yvd, 0, 0, 0, k.Yrd],
-                       [0, 0, k.Zwd, 0, k.Zqd, 0], [0, 0, 0, k.Kpd, 0, 0],
-                       [0, 0, k.Mwd, 0, k.Mqd, 0], [0, k.Nvd, 0, 0, 0, k.Nrd]])
-    return rigid + added
+    return rigid + added_mass(k)
+
+
+def added_mass(params: ROVParams) -> FloatArray:
+    """``M_A`` (6x6, kg, kg m, kg m^2), unchanged by the morph."""
+    k = params
+    return -np.array([[k.Xud, 0, 0, 0, 0, 0], [0, k.Yvd, 0, 0, 0, k.Yrd],
+                      [0, 0, k.Zwd, 0, k.Zqd, 0], [0, 0, 0, k.Kpd, 0, 0],
+                      [0, 0, k.Mwd, 0, k.Mqd, 0], [0, k.Nvd, 0, 0, 0, k.Nrd]])
 
 
 def _skew(a: FloatArray) -> FloatArray:
@@ -259,69 +285,81 @@ def _skew(a: FloatArray) -> FloatArray:
     return np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
 
 
-# -- feature layout of the batched right-hand side (rows of F^T) --------------------------------
-_ABS = slice(0, 6)  # nu_r|nu_r|: u, v, w, p, q, r
-_UV, _UW = 6, 7  # u_r v_r, u_r w_r
-_OMR = slice(8, 17)  # omega_i nu_r_j, index 8 + 3 i + j (i: p q r, j: u v w)
-_OMN = slice(17, 26)  # omega_i nu_j (rigid-body Coriolis, over ground)
-_ANG = slice(26, 32)  # p p, q q, r r, p q, p r, q r
-_RES = slice(32, 35)  # sin(theta), cos(theta) sin(phi), cos(theta) cos(phi)
-_TAU = slice(35, 41)  # X Y Z K M N
-_N_BASE = 41
-# features whose coefficients depend on s, and where their s-multiples go
-_MORPH_SRC = (slice(0, 6), slice(17, 35))
-_MORPH_DST = (slice(41, 47), slice(47, 65))
-_N_FEATURES = 65
+def _cross_map() -> FloatArray:
+    """(9, 3) map from the products ``a_i b_j`` (row 3 i + j) to ``a x b``."""
+    eps = np.zeros((3, 3, 3))
+    eps[0, 1, 2] = eps[1, 2, 0] = eps[2, 0, 1] = 1.0
+    eps[0, 2, 1] = eps[2, 1, 0] = eps[1, 0, 2] = -1.0
+    return eps.transpose(1, 2, 0).reshape(9, 3)
+
+
+_CROSS = _cross_map()
+
+
+# -- feature layout of the batched right-hand side (rows of F, one column per boat) ------------
+_OMR = slice(0, 9)  # omega_i nu_r_j at row 3 i + j (i: p q r; j: u v w): hydrodynamic
+_UV, _UW = 9, 10  # u_r v_r, u_r w_r
+_TAU = slice(11, 17)  # X Y Z K M N
+_ABS = slice(17, 23)  # u_r|u_r|, v_r|v_r|, w_r|w_r|, p|p|, q|q|, r|r|
+_OMN = slice(23, 32)  # omega_i nu_j at row 23 + 3 i + j: rigid-body Coriolis, over ground
+_ANG = slice(32, 38)  # p p, q q, r r, p q, p r, q r
+_RES = slice(38, 41)  # sin(theta), cos(theta) sin(phi), cos(theta) cos(phi)
+_MORPH = slice(17, 41)  # features whose coefficients change with s
+_STILL = slice(9, 41)  # features used in still water, where omega nu_r = omega nu (OMR folded)
+_N_FEATURES = 41
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 _X, _Y, _Z, _K, _M, _N = range(6)
 
 
 def _coefficient_matrix(k: ROVParams, c: dict[str, float]) -> FloatArray:
-    """(41, 6) matrix C with tau_total = F_base @ C for the shape ``c`` (affine in ``c``)."""
-    C = np.zeros((_N_BASE, 6))
-    om = lambda i, j: 8 + 3 * i + j  # noqa: E731  (omega_i * nu_r_j)
-    entries = {
-        (0, _X): "Xuu", (1, _Y): "Yvv", (1, _N): "Nvv", (2, _Z): "Zww", (2, _M): "Mww",
-        (3, _K): "Kpp", (4, _Z): "Zqq", (4, _M): "Mqq", (5, _Y): "Yrr", (5, _N): "Nrr",
+    """(41, 6) matrix C with tau_total = C^T F for the shape ``c`` (affine in ``c``)."""
+    C = np.zeros((_N_FEATURES, 6))
+    ab, ang = _ABS.start, _ANG.start
+    entries = {  # (feature row, force component): coefficient
+        (ab, _X): "Xuu", (ab + 1, _Y): "Yvv", (ab + 1, _N): "Nvv", (ab + 2, _Z): "Zww",
+        (ab + 2, _M): "Mww", (ab + 3, _K): "Kpp", (ab + 4, _Z): "Zqq", (ab + 4, _M): "Mqq",
+        (ab + 5, _Y): "Yrr", (ab + 5, _N): "Nrr",
         (_UV, _Y): "Yuv", (_UV, _N): "Nuv", (_UW, _Z): "Zuw", (_UW, _M): "Muw",
-        (om(0, 1), _Z): "Zvp", (om(0, 1), _M): "Mvp", (om(0, 2), _Y): "Ywp",
-        (om(0, 2), _N): "Nwp", (om(1, 0), _Z): "Zuq", (om(1, 0), _M): "Muq",
-        (om(1, 2), _X): "Xwq", (om(2, 0), _Y): "Yur", (om(2, 0), _N): "Nur",
-        (om(2, 1), _X): "Xvr", (27, _X): "Xqq", (28, _X): "Xrr", (29, _Y): "Ypq",
-        (29, _N): "Npq", (30, _Z): "Zrp", (30, _M): "Mrp",
+        (1, _Z): "Zvp", (1, _M): "Mvp", (2, _Y): "Ywp", (2, _N): "Nwp",  # p v, p w
+        (3, _Z): "Zuq", (3, _M): "Muq", (5, _X): "Xwq",  # q u, q w
+        (6, _Y): "Yur", (6, _N): "Nur", (7, _X): "Xvr",  # r u, r v
+        (ang + 1, _X): "Xqq", (ang + 2, _X): "Xrr", (ang + 3, _Y): "Ypq", (ang + 3, _N): "Npq",
+        (ang + 4, _Z): "Zrp", (ang + 4, _M): "Mrp",
     }
     for (row, col), name in entries.items():
         C[row, col] = c[name]
-    # rigid-body Coriolis, linear part: a = omega x nu1 = eps_kij omega_i nu_j
+    # rigid-body Coriolis, part linear in nu1: a = omega x nu1
     r_G = np.array([c["xG"], c["yG"], c["zG"]])
-    eps = np.zeros((3, 3, 3))
-    eps[0, 1, 2] = eps[1, 2, 0] = eps[2, 0, 1] = 1.0
-    eps[0, 2, 1] = eps[2, 1, 0] = eps[1, 0, 2] = -1.0
-    a_map = eps.transpose(1, 2, 0).reshape(9, 3)  # row 3 i + j -> coefficient of a_k
-    C[_OMN, :3] = -k.m * a_map
-    C[_OMN, 3:] = -k.m * a_map @ _skew(r_G).T  # -m r_G x a
-    # rigid-body Coriolis, angular part: -m w x (w x r_G) and -w x (I w), exact monomial split
+    C[_OMN, :3] = -k.m * _CROSS  # -m omega x nu1
+    C[_OMN, 3:] = -k.m * _CROSS @ _skew(r_G).T  # -m r_G x (omega x nu1)
+    # rigid-body Coriolis, part quadratic in omega: split exactly into the monomials of _ANG
     inertia = np.array([c["Ixx"], c["Iyy"], c["Izz"]])
 
-    def quad(w: FloatArray) -> FloatArray:
-        return np.concatenate([-k.m * np.cross(w, np.cross(w, r_G)), -np.cross(w, inertia * w)])
+    def quad(om: FloatArray) -> FloatArray:
+        return np.concatenate([-k.m * np.cross(om, np.cross(om, r_G)),
+                               -np.cross(om, inertia * om)])
 
     unit = np.eye(3)
-    for row, (i, j) in enumerate(_PAIRS, start=_ANG.start):
-        C[row] += quad(unit[i]) if i == j else quad(unit[i] + unit[j]) - quad(unit[i]) \
-            - quad(unit[j])
-    # restoring forces
+    for row, (i, j) in enumerate(_PAIRS, start=ang):
+        C[row] += quad(unit[i]) if i == j else \
+            quad(unit[i] + unit[j]) - quad(unit[i]) - quad(unit[j])
+    # restoring forces, g = r_G W - r_B B
     wb = k.W - k.B
     gx, gy, gz = r_G * k.W - np.array([c["xB"], c["yB"], c["zB"]]) * k.B
-    C[32, [_X, _M, _N]] = -wb, -gz, gy
-    C[33, [_Y, _K, _N]] = wb, -gz, gx
-    C[34, [_Z, _K, _M]] = wb, gy, -gx
+    res = _RES.start
+    C[res, [_X, _M, _N]] = -wb, -gz, gy
+    C[res + 1, [_Y, _K, _N]] = wb, -gz, gx
+    C[res + 2, [_Z, _K, _M]] = wb, gy, -gx
     C[_TAU] = np.eye(6)
     return C
 
 
 class ROVModel(VehicleModel):
-    """REMUS-100-type AUV/ROV with a cruise/work morphing hull (seed 002; MODELS.md 3)."""
+    """REMUS-100-type AUV/ROV with a cruise/work morphing hull (seed 002; MODELS.md 3).
+
+    :param params: the parameters; ``None`` = nominal (Prestero's REMUS-100 cruise shape and the
+        [PROPOSED] work shape of MODELS.md 3.4).
+    """
 
     name: ClassVar[str] = "rov"
     state_names: ClassVar[tuple[str, ...]] = (
@@ -332,40 +370,47 @@ class ROVModel(VehicleModel):
         "m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s", "m", "m", "m", "rad", "rad", "rad", "-")
     input_units: ClassVar[tuple[str, ...]] = ("N", "N", "N", "N m", "N m", "N m")
     disturbance_units: ClassVar[tuple[str, ...]] = ("m/s", "m/s", "m/s", "-")
-    #: Nominal cruise: REMUS cruise speed, m/s, and depth, m.
+    #: Nominal point: REMUS cruise speed, m/s, and depth, m.
     cruise_speed: ClassVar[float] = 1.5
     cruise_depth: ClassVar[float] = 5.0
 
     def __init__(self, params: ROVParams | None = None) -> None:
         super().__init__(ROVParams() if params is None else params)
         k = self.params
-        c0, c1 = k.shape_at(0.0), k.shape_at(1.0)
-        base0 = _coefficient_matrix(k, c0)
-        delta = _coefficient_matrix(k, c1) - base0
-        coeffs = np.zeros((_N_FEATURES, 6))
-        coeffs[:_N_BASE] = base0
-        keep = np.zeros(_N_BASE, dtype=bool)
-        for src, dst in zip(_MORPH_SRC, _MORPH_DST, strict=True):
-            coeffs[dst] = delta[src]
-            keep[src] = True
-        assert not delta[~keep].any(), "a morphing coefficient outside the morph features"
-        self._coeffs = coeffs  # tau_total = [F, s F] @ coeffs
-        # exact M(s)^-1 = V diag(1/(1 + s lam)) L for M(s) = M0 + s dM
-        M0, dM = mass_matrix(k, 0.0), mass_matrix(k, 1.0) - mass_matrix(k, 0.0)
+        C0 = _coefficient_matrix(k, k.shape_at(0.0))
+        dC = _coefficient_matrix(k, k.shape_at(1.0)) - C0
+        if dC[:_MORPH.start].any():
+            raise AssertionError("a morphing coefficient outside the morph features")
+        still = C0[_STILL].copy()
+        still[_OMN.start - _STILL.start:_OMN.stop - _STILL.start] += C0[_OMR]
+        C0_cur = C0.copy()
+        if k.current_inertia == "relative":
+            # M_A nu_r_dot = M_A nu_dot + M_A [omega x nu_c; 0]: move the second term to the
+            # right; omega_i nu_c_j = F[_OMN] - F[_OMR], so it is linear in the features
+            term = _CROSS @ -added_mass(k)[:, :3].T
+            C0_cur[_OMN] += term
+            C0_cur[_OMR] -= term
+        # tau_total = C0^T F + s dC^T F[_MORPH]   (forces(); trim)
+        self._C0T, self._dCT = C0_cur.T.copy(), dC[_MORPH].T.copy()
+        # M(s) = M0 + s dM = L^-1 diag(1 + s lam) V^-1, so M(s)^-1 = V diag(1 / (1 + s lam)) L
+        M0 = mass_matrix(k, 0.0)
+        dM = mass_matrix(k, 1.0) - M0
         if np.array_equal(M0, M0.T) and np.array_equal(dM, dM.T):
-            lam, V = scipy.linalg.eigh(dM, M0)  # V^T M0 V = I
+            lam, V = scipy.linalg.eigh(dM, M0)  # V^T M0 V = I, V^T dM V = diag(lam)
             L = V.T
         else:  # non-symmetric added mass (Yrd != Nvd or Zqd != Mwd): general eigenproblem
             lam, V = np.linalg.eig(np.linalg.solve(M0, dM))
             require(bool(np.all(np.abs(lam.imag) < 1e-9 * (1 + np.abs(lam.real))))
                     and np.linalg.cond(V) < 1e8, "added mass (Yrd, Nvd, Zqd, Mwd)",
-                    (k.Yrd, k.Nvd, k.Zqd, k.Mwd), "too far from symmetric for the exact "
-                    "morph inverse")
+                    (k.Yrd, k.Nvd, k.Zqd, k.Mwd),
+                    "too far from symmetric for the exact morph inverse")
             lam, V = lam.real, V.real
             L = np.linalg.solve(V, np.linalg.inv(M0))
-        self._lam = np.ascontiguousarray(lam[:, None])  # (6, 1)
-        self._V = np.ascontiguousarray(V)
-        self._GT = np.ascontiguousarray((coeffs @ L.T).T)  # (6, 65): y = GT @ F^T
+        self._lam, self._lam_col, self._V = lam, lam[:, None].copy(), np.ascontiguousarray(V)
+        # y = A F, nu_dot = V (y + s B F[_MORPH]) / (1 + s lam); with s = 0: nu_dot = P F
+        self._A_cur, self._A_still = L @ C0_cur.T, L @ still.T
+        self._B = L @ dC[_MORPH].T
+        self._P_cur, self._P_still = V @ self._A_cur, V @ self._A_still
         self._inv_T_m = 1.0 / k.T_m
         self._x0 = np.zeros(len(self.state_names))
         self._x0[[0, 8]] = self.cruise_speed, self.cruise_depth
@@ -374,7 +419,7 @@ class ROVModel(VehicleModel):
         low[_K], high[_K] = -k.K_max, k.K_max
         self._u_bounds = (low, high)
 
-    # -- nominal point and bounds ------------------------------------------------------------------
+    # -- nominal point, bounds, shape ---------------------------------------------------------
     @property
     def x0(self) -> FloatArray:
         """Cruise at ``u = 1.5 m/s``, depth 5 m, level, heading north, cruise shape (s = 0)."""
@@ -383,7 +428,7 @@ class ROVModel(VehicleModel):
     @property
     def u0(self) -> FloatArray:
         """Generalised forces holding :attr:`x0` at zero acceleration (``x`` still grows at
-        1.5 m/s): surge thrust against the drag and heave force against the net buoyancy."""
+        1.5 m/s): surge thrust against the drag, heave force against the net buoyancy."""
         return self._u0.copy()
 
     @property
@@ -393,8 +438,8 @@ class ROVModel(VehicleModel):
         return self._u_bounds[0].copy(), self._u_bounds[1].copy()
 
     def coefficients(self, s: float) -> dict[str, float]:
-        """Interpolated coefficients, r_G, r_B and I_b at morph fraction ``s`` (see
-        :meth:`ROVParams.shape_at`)."""
+        """Interpolated coefficients, r_G, r_B (m) and I_b (kg m^2) at morph fraction ``s``
+        (:meth:`ROVParams.shape_at`)."""
         return self.params.shape_at(s)
 
     def mass_matrix(self, s: float = 0.0) -> FloatArray:
@@ -403,45 +448,55 @@ class ROVModel(VehicleModel):
 
     def trim_forces(self, u_speed: float, s: float = 0.0) -> FloatArray:
         """Generalised forces (N, N m) that hold steady, level, straight motion at surge speed
-        ``u_speed`` (m/s) in still water with the hull held at shape ``s`` (``s_cmd = s``)."""
+        ``u_speed`` (m/s) in still water with the hull held at shape ``s`` (``s_cmd = s``):
+        ``X = -Xuu(s) u|u|``, ``Z = -(W - B)``, ``M = x_G W - x_B B`` (interpolated)."""
         x = np.zeros(len(self.state_names))
         x[[0, 8, 12]] = u_speed, self.cruise_depth, s
-        d = np.array([0.0, 0.0, 0.0, s])
-        return -self.forces(x, np.zeros(6), d)
+        return -self.forces(x, np.zeros(6), np.array([0.0, 0.0, 0.0, s]))
 
-    # -- dynamics ----------------------------------------------------------------------------------
+    # -- dynamics ------------------------------------------------------------------------------
     def forces(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
         """Total generalised force at the CB, ``-C_RB nu + tau_hyd + tau_s + tau`` (N, N m),
         shape ``(..., 6)``: the right-hand side of ``M(s) nu_dot = ...``."""
         x, u, d, shape = self._flat(x, u, d)
-        F, _, _ = self._features(x, u, d)
-        return (self._coeffs.T @ F).T.reshape(*shape, 6)
+        xt = np.ascontiguousarray(x.T)
+        F, _, _ = self._features(xt, u, d, full=True)
+        tau = self._C0T @ F + xt[12] * (self._dCT @ F[_MORPH])
+        return tau.T.reshape(*shape, 6)
 
     def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
         x, u, d, shape = self._flat(x, u, d)
-        n = x.shape[0]
-        F, trig, nu1_t = self._features(x, u, d)
-        out = np.empty((13, n))
-        # nu_dot = V diag(1 / (1 + s lam)) L tau_total, with L folded into GT
-        y = self._GT @ F
-        s = x[:, 12]
-        y /= 1.0 + self._lam * s
-        np.matmul(self._V, y, out=out[:6])
+        if x.shape[0] == 1:  # single boat: Python floats beat numpy's per-call overhead
+            return self._rhs_one(x[0], u[0], d[0]).reshape(*shape, 13)
+        xt = np.ascontiguousarray(x.T)  # one row per state: contiguous rows for every op
+        F, (sin, cos), current = self._features(xt, u, d)
+        out = np.empty((13, xt.shape[1]))
+        s = xt[12]
+        used = F if current else F[_STILL]
+        if s.any():
+            y = (self._A_cur if current else self._A_still) @ used
+            y += s * (self._B @ F[_MORPH])
+            y /= 1.0 + self._lam_col * s
+            np.matmul(self._V, y, out=out[:6])
+        else:  # the whole batch in cruise shape: M0^-1 is folded into one matrix
+            np.matmul(self._P_cur if current else self._P_still, used, out=out[:6])
         # kinematics: NED velocity R nu1 = Rz Ry Rx nu1, then the Euler-angle rates
-        sphi, sth, spsi, cphi, cth, cpsi = trig
-        u_, v_, w_ = nu1_t
+        sphi, sth, spsi = sin
+        cphi, cth, cpsi = cos
+        u_, v_, w_, p_, q_, r_ = xt[:6]
         b = cphi * v_ - sphi * w_
         c = sphi * v_ + cphi * w_
-        a2 = cth * u_ + sth * c
-        out[6] = cpsi * a2 - spsi * b
-        out[7] = spsi * a2 + cpsi * b
+        a = cth * u_ + sth * c
+        out[6] = cpsi * a - spsi * b
+        out[7] = spsi * a + cpsi * b
         out[8] = cth * c - sth * u_
-        q, r = x[:, 4], x[:, 5]
-        t1 = q * sphi + r * cphi
-        out[9] = x[:, 3] + t1 * (sth / cth)
-        out[10] = q * cphi - r * sphi
-        out[11] = t1 / cth
-        out[12] = (d[:, 3] - s) * self._inv_T_m
+        t1 = q_ * sphi + r_ * cphi
+        sec = 1.0 / cth
+        out[9] = p_ + t1 * sth * sec
+        out[10] = q_ * cphi - r_ * sphi
+        np.multiply(t1, sec, out=out[11])
+        np.subtract(d[:, 3], s, out=out[12])
+        out[12] *= self._inv_T_m
         return out.T.reshape(*shape, 13)
 
     def _flat(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None):
@@ -449,54 +504,99 @@ class ROVModel(VehicleModel):
         x = np.asarray(x, dtype=float)
         u = np.asarray(u, dtype=float)
         d = np.zeros(4) if d is None else np.asarray(d, dtype=float)
-        if x.ndim == 2 and u.shape == (x.shape[0], 6) and d.shape == (x.shape[0], 4) \
-                and x.shape[1] == 13:
-            return x, u, d, x.shape[:1]  # the vector env's hot path
+        if x.ndim == 2 and x.shape[1] == 13 and u.shape == (x.shape[0], 6) \
+                and d.shape == (x.shape[0], 4):
+            return x, u, d, x.shape[:1]  # the vector environment's hot path
+        if x.shape == (13,) and u.shape == (6,) and d.shape == (4,):
+            return x[None], u[None], d[None], ()  # one boat
         x, u, d = self._split(x, u, d)
         shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], d.shape[:-1])
         return (np.broadcast_to(x, (*shape, 13)).reshape(-1, 13),
                 np.broadcast_to(u, (*shape, 6)).reshape(-1, 6),
                 np.broadcast_to(d, (*shape, 4)).reshape(-1, 4), shape)
 
-    def _features(self, x: FloatArray, u: FloatArray, d: FloatArray):
-        """Feature matrix F^T (65, n), the six trig rows, and the linear velocity rows."""
-        n = x.shape[0]
-        xt = x.T
+    def _features(self, xt: FloatArray, u: FloatArray, d: FloatArray, full: bool = False):
+        """Feature matrix F (41, n) from the state rows ``xt`` (13, n), the Euler angles' sines
+        and cosines (3, n) each, and whether a current is present. Without a current (and
+        ``full`` False) the rows ``_OMR`` are left unset: ``_STILL`` folds them into ``_OMN``."""
+        n = xt.shape[1]
         F = np.empty((_N_FEATURES, n))
-        angles = xt[9:12]
-        sin, cos = np.sin(angles), np.cos(angles)
+        # sin and cos from one tan (half-angle formulas): half the cost of np.sin + np.cos
+        t = np.tan(0.5 * xt[9:12])
+        t2 = t * t
+        den = 1.0 / (1.0 + t2)
+        t *= 2.0
+        sin = t * den
+        cos = np.subtract(1.0, t2, out=t2)
+        cos *= den
         sphi, sth, spsi = sin
         cphi, cth, cpsi = cos
-        nu1 = xt[:3]
-        om = xt[3:6]
-        current = d[:, :3]
-        if current.any():
-            # body-frame current R^T v_c = Rx^T Ry^T Rz^T v_c
-            vn, ve, vd = current.T
+        nu1, om = xt[0:3], xt[3:6]
+        cur = d[:, :3]
+        current = bool(cur.any())
+        if current:
+            vn, ve, vd = cur.T  # body-frame current R^T v_c = Rx^T Ry^T Rz^T v_c
             a = cpsi * vn + spsi * ve
             b = cpsi * ve - spsi * vn
             c = sth * a + cth * vd
-            nur1 = np.empty((3, n))
-            np.subtract(nu1[0], cth * a - sth * vd, out=nur1[0])
-            np.subtract(nu1[1], cphi * b + sphi * c, out=nur1[1])
-            np.subtract(nu1[2], cphi * c - sphi * b, out=nur1[2])
-            F[0:3] = nur1
-            F[3:6] = om
+            nur = F[_ABS]  # u_r v_r w_r p q r, squared in place once the products are taken
+            np.subtract(nu1[0], cth * a - sth * vd, out=nur[0])
+            np.subtract(nu1[1], cphi * b + sphi * c, out=nur[1])
+            np.subtract(nu1[2], cphi * c - sphi * b, out=nur[2])
+            nur[3:] = om
+            nur1 = nur[:3]
         else:
-            nur1 = nu1
-            F[0:6] = xt[:6]
-        np.multiply(F[0:6], np.abs(F[0:6]), out=F[_ABS])
+            nur, nur1 = xt[:6], nu1
+        if current or full:
+            np.multiply(om[:, None, :], nur1[None, :, :], out=F[_OMR].reshape(3, 3, n))
         np.multiply(nur1[0], nur1[1:3], out=F[_UV:_UW + 1])
-        np.multiply(om[:, None, :], nur1[None, :, :], out=F[_OMR].reshape(3, 3, n))
+        np.multiply(nur, np.abs(nur), out=F[_ABS])
         np.multiply(om[:, None, :], nu1[None, :, :], out=F[_OMN].reshape(3, 3, n))
-        np.multiply(om, om, out=F[26:29])
-        np.multiply(om[0], om[1:3], out=F[29:31])
-        np.multiply(om[1], om[2], out=F[31])
-        F[32] = sth
-        np.multiply(cth, sphi, out=F[33])
-        np.multiply(cth, cphi, out=F[34])
+        ang = _ANG.start
+        np.multiply(om, om, out=F[ang:ang + 3])
+        np.multiply(om[0], om[1:3], out=F[ang + 3:ang + 5])
+        np.multiply(om[1], om[2], out=F[ang + 5])
+        F[_RES.start] = sth
+        np.multiply(cth, sin[0], out=F[_RES.start + 1])
+        np.multiply(cth, cphi, out=F[_RES.start + 2])
         F[_TAU] = u.T
-        s = xt[12]
-        for src, dst in zip(_MORPH_SRC, _MORPH_DST, strict=True):
-            np.multiply(F[src], s, out=F[dst])
-        return F, (sphi, sth, spsi, cphi, cth, cpsi), nu1
+        return F, (sin, cos), current
+
+    def _rhs_one(self, x: FloatArray, u: FloatArray, d: FloatArray) -> FloatArray:
+        """:meth:`rhs` of one boat on Python floats (same equations and feature layout)."""
+        u_, v, w, p, q, r, _, _, _, phi, theta, psi, s = x.tolist()
+        vn, ve, vd, s_cmd = d.tolist()
+        sphi, cphi = math.sin(phi), math.cos(phi)
+        sth, cth = math.sin(theta), math.cos(theta)
+        spsi, cpsi = math.sin(psi), math.cos(psi)
+        if vn or ve or vd:
+            a = cpsi * vn + spsi * ve
+            b = cpsi * ve - spsi * vn
+            c = sth * a + cth * vd
+            ur, vr, wr = u_ - (cth * a - sth * vd), v - (cphi * b + sphi * c), \
+                w - (cphi * c - sphi * b)
+            f = [p * ur, p * vr, p * wr, q * ur, q * vr, q * wr, r * ur, r * vr, r * wr]
+            A, P = self._A_cur, self._P_cur
+        else:
+            ur, vr, wr = u_, v, w
+            f = []
+            A, P = self._A_still, self._P_still
+        f += [ur * vr, ur * wr, *u.tolist(),
+              ur * abs(ur), vr * abs(vr), wr * abs(wr), p * abs(p), q * abs(q), r * abs(r),
+              p * u_, p * v, p * w, q * u_, q * v, q * w, r * u_, r * v, r * w,
+              p * p, q * q, r * r, p * q, p * r, q * r, sth, cth * sphi, cth * cphi]
+        out = np.empty(13)
+        feats = np.array(f)
+        if s:
+            y = A @ feats + s * (self._B @ feats[-24:])
+            y /= 1.0 + s * self._lam
+            out[:6] = self._V @ y
+        else:
+            out[:6] = P @ feats
+        b = cphi * v - sphi * w
+        c = sphi * v + cphi * w
+        a = cth * u_ + sth * c
+        t1 = q * sphi + r * cphi
+        out[6:] = (cpsi * a - spsi * b, spsi * a + cpsi * b, cth * c - sth * u_,
+                   p + t1 * sth / cth, q * cphi - r * sphi, t1 / cth, (s_cmd - s) * self._inv_T_m)
+        return out
