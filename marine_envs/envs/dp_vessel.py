@@ -18,7 +18,8 @@ DEG = math.pi / 180
 #: Position reference and gyrocompass: position sigma from seed 003's R_ident = 1e-3 m^2; the
 #: seed's 2e-2 on heading (8 deg if rad) is implausible, a gyrocompass's 0.1 deg is used [PROPOSED].
 DEFAULT_SENSORS = {"noise_std": {"north": math.sqrt(1e-3), "east": math.sqrt(1e-3),
-                                 "psi": 0.1 * DEG}}
+                                 "psi": 0.1 * DEG},
+                   "sensor_range": {"north": 1000.0, "east": 1000.0}}  # m, full scale
 #: Bryson's rule: 1 m, 1 m and 1 deg of low-frequency error; 200 kN, 150 kN, 5 MN m of thrust.
 DEFAULT_STATE_WEIGHTS = {"north_lf": 1.0, "east_lf": 1.0, "psi_lf": 1 / DEG**2}
 DEFAULT_INPUT_WEIGHTS = {"X": 1 / 2e5**2, "Y": 1 / 1.5e5**2, "N": 1 / 5e6**2}

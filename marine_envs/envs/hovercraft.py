@@ -18,7 +18,8 @@ from .core import Simulator, make_sensors, make_task, uniform_initial_state
 
 DEG = math.pi / 180
 #: Doppler/GNSS speed log and fibre-optic gyro [PROPOSED]: noise std per channel, SI units.
-DEFAULT_SENSORS = {"noise_std": {"u": 0.05, "v": 0.05, "r": 0.1 * DEG, "psi": 0.2 * DEG}}
+DEFAULT_SENSORS = {"noise_std": {"u": 0.05, "v": 0.05, "r": 0.1 * DEG, "psi": 0.2 * DEG},
+                   "sensor_range": {"u": 40.0, "v": 20.0, "r": math.pi / 2}}  # full scales
 #: Bryson's rule: 5 deg of heading, 1 m/s of speed, a quarter pitch, 10 deg of rudder.
 DEFAULT_STATE_WEIGHTS = {"psi": 1 / (5 * DEG) ** 2, "u": 1.0}
 DEFAULT_INPUT_WEIGHTS = {"sigma_1": 16.0, "sigma_2": 16.0, "delta": 1 / (10 * DEG) ** 2}

@@ -14,7 +14,9 @@ from .core import Simulator, make_sensors, make_task, uniform_initial_state
 
 DEG = math.pi / 180
 #: Seed 001: C = I4 and measurement noise variance WR = 0.003 on every channel.
-DEFAULT_SENSORS = {"noise_std": math.sqrt(0.003)}
+DEFAULT_SENSORS = {"noise_std": math.sqrt(0.003),
+                   "sensor_range": {"xi": 5.0, "theta": math.pi / 2, "xi_dot": 5.0,
+                                    "theta_dot": math.pi / 2}}  # full scales [PROPOSED]
 #: Seed 001's LQR weights Q = diag(0, 100, 0, 1000), R = I2, plus a small heave weight: with none
 #: the weakly unstable heave drifts to broaching within minutes; larger ones feed the 5.5 cm heave
 #: noise into the foils.

@@ -22,6 +22,9 @@ DEFAULT_SENSORS = {
                   "psi": 0.05 * DEG, "p": 0.01 * DEG, "q": 0.01 * DEG, "r": 0.01 * DEG,
                   "z": 0.02},
     "sample_period": {"u": 2, "v": 2, "w": 2},
+    # full scales [PROPOSED]: DVL 5 m/s, gyro 90 deg and 90 deg/s, a 300 m depth cell
+    "sensor_range": {"u": 5.0, "v": 5.0, "w": 5.0, "phi": math.pi / 2, "theta": math.pi / 2,
+                     "p": math.pi / 2, "q": math.pi / 2, "r": math.pi / 2, "z": 300.0},
 }
 #: Bryson's rule: 0.1 m/s of velocity, 0.2 m of depth, 5 deg of heading, 10 deg of roll and
 #: pitch; the thrusters' ranges for the inputs.

@@ -60,8 +60,9 @@ roll and pitch is quadratic, so at hover the BG pendulums (about 5.6 and 0.85 ra
 undamped to first order. Under way, the Munk moments of the streamlined hull dominate: with
 ``Nuv < 0`` the vehicle is directionally unstable at every forward speed, and with ``Muw > 0``
 pitch is unstable above 0.60 m/s (0.84 m/s in work shape; at 1.5 m/s: pitch eigenvalues
-0.42 +- 0.22j 1/s, yaw divergence +1.0 1/s), while roll stays stable. REMUS flies under autopilot; DSTO's listing adds
-Fodrea's revised linear coefficients (Mw = -9.3, Nv = -4.47), which MODELS.md does not use.
+0.42 +- 0.22j 1/s, yaw divergence +1.0 1/s), while roll stays stable. REMUS flies under
+autopilot; DSTO's listing adds Fodrea's revised linear coefficients (Mw = -9.3, Nv = -4.47),
+which MODELS.md does not use.
 
 **Implementation.** ``rhs`` is written for batches (one contiguous row per state): the forces are
 linear in a feature matrix ``F`` of products (``u|u|``, ``w q``, ``sin(theta)``, ``tau``, ...),
@@ -95,7 +96,7 @@ THRUSTER_DIRECTIONS: FloatArray = np.array([
     [1.0, 0, 0], [1.0, 0, 0], [0, 1.0, 0], [0, 1.0, 0], [0, 0, 1.0], [0, 0, 1.0]])
 #: Allocation matrix B_T (6x6): tau = B_T f, column i = [d_i; r_i x d_i]. Rank 5, zero roll row.
 THRUSTER_ALLOCATION: FloatArray = np.vstack([
-    THRUSTER_DIRECTIONS.T, np.cross(THRUSTER_POSITIONS, THRUSTER_DIRECTIONS).T])
+    THRUSTER_DIRECTIONS.T, np.cross(THRUSTER_POSITIONS, THRUSTER_DIRECTIONS).T]) + 0.0  # no -0
 #: Thrust limits (low, high) of each thruster, N.
 THRUSTER_LIMITS: tuple[FloatArray, FloatArray] = (
     np.array([-20.0, -20.0, -10.0, -10.0, -10.0, -10.0]),
