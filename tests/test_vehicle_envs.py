@@ -196,7 +196,7 @@ def test_rov_thruster_actions_pass_through_the_allocation_matrix():
 def test_dp_drive_off_terminates():
     env = gym.make("marine_envs/DPVessel-v0", max_offset=5.0, initial_spread={})
     env.reset(seed=0)
-    for step in range(400):
+    for _ in range(400):
         _, _, terminated, _, info = env.step(np.array([1.0, 0.0, 0.0], dtype=np.float32))
         if terminated:
             break
