@@ -1,9 +1,11 @@
-"""Environment throughput against Gymnasium's CartPole, measured in one run on one machine.
+"""Environment throughput of every vehicle against Gymnasium's CartPole, in one run on one machine.
 
 Absolute steps/s on shared machines are noise; the ratios to CartPole measured in the same run
-are the numbers to compare. Each figure is the best of several interleaved repeats.
+are the numbers to compare. Each figure is the best of several interleaved repeats, and every
+vehicle's figure is taken next to a CartPole figure of the same repeat.
 
-    python benchmarks/throughput.py [--repeats 5] [--steps 3000] [--json out.json]
+    python benchmarks/throughput.py [--repeats 3] [--steps 2000] [--sizes 1 64 1024]
+                                    [--envs USV ROV ...] [--json out.json]
 """
 
 from __future__ import annotations
@@ -17,18 +19,26 @@ from collections.abc import Callable
 import gymnasium as gym
 import numpy as np
 
-import marine_envs  # noqa: F401
+from marine_envs import ENVIRONMENTS
 
-USV = "marine_envs/USV-v0"
-# acceptance (minimum) and goal ratios of the foundation issue
-TARGETS = {"single": (0.3, 0.6), 1024: (0.25, 0.5)}
+CARTPOLE = "CartPole-v1"
+#: acceptance (minimum) and goal ratios to CartPole, by (environment, case)
+TARGETS = {("USV", "single"): (0.3, 0.6), ("USV", 1024): (0.25, 0.5), ("ROV", 1024): (0.05, 0.2)}
+SHORT = {env_id.split("/")[1].removesuffix("-v0"): env_id for env_id in ENVIRONMENTS}
+
+
+def _neutral_action(space: gym.Space) -> np.ndarray | int:
+    """A valid action that keeps the episode going: the middle of a Box, 1 for CartPole."""
+    if isinstance(space, gym.spaces.Box):
+        return np.zeros(space.shape, dtype=np.float32)
+    return np.ones(space.shape, dtype=np.int64) if space.shape else 1
 
 
 def single_stepper(env_id: str) -> Callable[[int], float]:
     """Seconds to run n steps of ``gym.make(env_id)`` (with its standard wrappers)."""
     env = gym.make(env_id)
     env.reset(seed=0)
-    action = np.zeros(env.action_space.shape, dtype=np.float32) if env_id == USV else 1
+    action = _neutral_action(env.action_space)
 
     def run(n: int) -> float:
         start = time.perf_counter()
@@ -45,8 +55,7 @@ def vector_stepper(env_id: str, num_envs: int) -> Callable[[int], float]:
     """Seconds to run n steps of the native vector env (auto-resets included)."""
     env = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point")
     env.reset(seed=0)
-    action = (np.zeros((num_envs, 1), dtype=np.float32) if env_id == USV
-              else np.ones(num_envs, dtype=np.int64))
+    action = _neutral_action(env.action_space)
 
     def run(n: int) -> float:
         start = time.perf_counter()
@@ -67,42 +76,63 @@ def best_rate(steppers: dict[str, Callable[[int], float]], steps: int, repeats: 
     return best
 
 
+def measure(vehicles: list[str], sizes: list[int], steps: int, repeats: int) -> list[dict]:
+    """Rows ``{vehicle, case, reference, reference_steps_per_s, steps_per_s, ratio}``."""
+    from tqdm import tqdm
+
+    cases: list[str | int] = ["single", *sizes]
+    rows = []
+    for case in tqdm(cases, desc="benchmark", unit="case"):
+        if case == "single":
+            make, n, reference = single_stepper, 1, CARTPOLE
+            # single steps are cheap: more of them for a stable figure
+            count = steps * 5
+            steppers = {"ref": make(CARTPOLE), **{v: make(SHORT[v]) for v in vehicles}}
+        else:
+            n, reference, count = case, "CartPoleVectorEnv", max(20, steps * 64 // max(case, 64))
+            steppers = {"ref": vector_stepper(CARTPOLE, n),
+                        **{v: vector_stepper(SHORT[v], n) for v in vehicles}}
+        rate = best_rate(steppers, count, repeats, scale=n)
+        for vehicle in vehicles:
+            rows.append({"vehicle": vehicle, "case": case, "reference": reference,
+                         "reference_steps_per_s": rate["ref"], "steps_per_s": rate[vehicle],
+                         "ratio": rate[vehicle] / rate["ref"]})
+    return rows
+
+
+def format_table(rows: list[dict]) -> str:
+    """The rows as a table, with the targets of the issues where they set one."""
+    lines = [f"{'vehicle':<12}{'case':<10}{'reference':<19}{'ref steps/s':>13}"
+             f"{'steps/s':>12}{'ratio':>8}{'target (goal)':>17}"]
+    for row in rows:
+        case = "single" if row["case"] == "single" else f"N={row['case']}"
+        target = TARGETS.get((row["vehicle"], row["case"]))
+        mark = "" if target is None else (f"{target[0]:.2f} ({target[1]:.2f}) "
+                                          + ("ok" if row["ratio"] >= target[0] else "LOW"))
+        lines.append(f"{row['vehicle']:<12}{case:<10}{row['reference']:<19}"
+                     f"{row['reference_steps_per_s']:>13,.0f}{row['steps_per_s']:>12,.0f}"
+                     f"{row['ratio']:>8.3f}{mark:>17}")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--repeats", type=int, default=5, help="interleaved repeats (5)")
-    parser.add_argument("--steps", type=int, default=3000, help="steps per repeat (3000)")
+    parser.add_argument("--repeats", type=int, default=3, help="interleaved repeats (3)")
+    parser.add_argument("--steps", type=int, default=2000,
+                        help="steps per repeat for N <= 64; fewer for larger N (2000)")
     parser.add_argument("--sizes", type=int, nargs="+", default=[1, 64, 1024],
                         help="vector sizes N (1 64 1024)")
+    parser.add_argument("--envs", nargs="+", default=list(SHORT), choices=list(SHORT),
+                        help="vehicles (all)")
     parser.add_argument("--json", help="also write the results as JSON")
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
-
-    rows = []
-    single = best_rate({"cartpole": single_stepper("CartPole-v1"), "usv": single_stepper(USV)},
-                       args.steps * 5, args.repeats)
-    rows.append(("single env (gym.make)", "CartPole-v1", single["cartpole"], single["usv"],
-                 TARGETS["single"]))
-    for n in args.sizes:
-        rate = best_rate({"cartpole": vector_stepper("CartPole-v1", n),
-                          "usv": vector_stepper(USV, n)}, args.steps, args.repeats, scale=n)
-        rows.append((f"vector env N={n}", "CartPoleVectorEnv", rate["cartpole"], rate["usv"],
-                     TARGETS.get(n)))
-
-    print(f"{'case':<24}{'reference':<20}{'ref steps/s':>14}{'USV steps/s':>14}{'ratio':>8}"
-          f"{'target (goal)':>16}")
-    results = []
-    for case, reference, ref_rate, usv_rate, target in rows:
-        ratio = usv_rate / ref_rate
-        mark = "" if target is None else (f"{target[0]:.2f} ({target[1]:.2f}) "
-                                          + ("ok" if ratio >= target[0] else "LOW"))
-        print(f"{case:<24}{reference:<20}{ref_rate:>14,.0f}{usv_rate:>14,.0f}{ratio:>8.2f}"
-              f"{mark:>16}")
-        results.append({"case": case, "reference": reference, "reference_steps_per_s": ref_rate,
-                        "usv_steps_per_s": usv_rate, "ratio": ratio})
+    rows = measure(args.envs, args.sizes, args.steps, args.repeats)
+    print(format_table(rows))
     if args.json:
         with open(args.json, "w") as f:
-            json.dump(results, f, indent=2)
+            json.dump(rows, f, indent=2)
 
 
 if __name__ == "__main__":

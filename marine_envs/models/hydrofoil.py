@@ -164,6 +164,11 @@ class HydrofoilTrim:
     h: FloatArray
 
 
+def _rows(a: FloatArray) -> FloatArray:
+    """The last axis first, as a contiguous array (so its rows unpack into 1-D arrays)."""
+    return np.ascontiguousarray(a.T if a.ndim <= 2 else np.moveaxis(a, -1, 0))
+
+
 class HydrofoilModel(VehicleModel):
     """Heave/pitch of a fully-submerged two-foil craft at constant speed (seed 001).
 
@@ -236,19 +241,21 @@ class HydrofoilModel(VehicleModel):
         than a trailing foil axis, whose broadcasts and strided slices dominate the cost.
         """
         p = self.params
-        xi, theta, xi_dot, theta_dot = np.moveaxis(x, -1, 0).copy()
-        alpha_s1, alpha_s2 = np.moveaxis(u, -1, 0).copy()
-        zeta_dot_1, zeta_dot_2, eta_1, eta_2, u_w1, u_w2 = np.moveaxis(d, -1, 0).copy()
+        # one transposing copy per argument (contiguous rows; cheaper than moveaxis)
+        xi, theta, xi_dot, theta_dot = _rows(x)
+        alpha_s1, alpha_s2 = _rows(u)
+        zeta_dot_1, zeta_dot_2, eta_1, eta_2, u_w1, u_w2 = _rows(d)
         x1, x2 = self._x1, self._x2
         sin, cos = np.sin(theta), np.cos(theta)
         depth = xi + p.l * cos
         h1 = depth - x1 * sin + eta_1
         h2 = depth - x2 * sin + eta_2
         U1, U2 = p.U - u_w1, p.U - u_w2
-        alpha_1 = np.clip((xi_dot - x1 * theta_dot + zeta_dot_1) / U1 + theta + alpha_s1,
-                          -p.alpha_stall, p.alpha_stall)
-        alpha_2 = np.clip((xi_dot - x2 * theta_dot + zeta_dot_2) / U2 + theta + alpha_s2,
-                          -p.alpha_stall, p.alpha_stall)
+        stall = p.alpha_stall  # (minimum/maximum: np.clip costs several times more)
+        alpha_1 = np.minimum(np.maximum(
+            (xi_dot - x1 * theta_dot + zeta_dot_1) / U1 + theta + alpha_s1, -stall), stall)
+        alpha_2 = np.minimum(np.maximum(
+            (xi_dot - x2 * theta_dot + zeta_dot_2) / U2 + theta + alpha_s2, -stall), stall)
         # a*k(h/c) = a - (a/2)/(1 + 8 (h/c)^2), the same k(r) = (1 + 16r^2)/(2 + 16r^2)
         C_L1 = (self._a1 - self._half_a1 / (1 + self._k1 * h1 * h1)) * alpha_1
         C_L2 = (self._a2 - self._half_a2 / (1 + self._k2 * h2 * h2)) * alpha_2

@@ -408,10 +408,15 @@ class ROVModel(VehicleModel):
             lam, V = lam.real, V.real
             L = np.linalg.solve(V, np.linalg.inv(M0))
         self._lam, self._lam_col, self._V = lam, lam[:, None].copy(), np.ascontiguousarray(V)
-        # y = A F, nu_dot = V (y + s B F[_MORPH]) / (1 + s lam); with s = 0: nu_dot = P F
+        # nu_dot = V (A F + s B F[_MORPH]) / (1 + s lam); with s = 0 everywhere: nu_dot = P F
         self._A_cur, self._A_still = L @ C0_cur.T, L @ still.T
         self._B = L @ dC[_MORPH].T
         self._P_cur, self._P_still = V @ self._A_cur, V @ self._A_still
+        # [A; B] stacked over the features in use: one GEMM for both (B padded with zeros)
+        self._AB_cur = np.zeros((12, _N_FEATURES))
+        self._AB_cur[:6], self._AB_cur[6:, _MORPH] = self._A_cur, self._B
+        self._AB_still = self._AB_cur[:, _STILL].copy()
+        self._AB_still[:6] = self._A_still
         self._inv_T_m = 1.0 / k.T_m
         self._x0 = np.zeros(len(self.state_names))
         self._x0[[0, 8]] = self.cruise_speed, self.cruise_depth
@@ -475,8 +480,9 @@ class ROVModel(VehicleModel):
         s = xt[12]
         used = F if current else F[_STILL]
         if s.any():
-            y = (self._A_cur if current else self._A_still) @ used
-            y += s * (self._B @ F[_MORPH])
+            Y = (self._AB_cur if current else self._AB_still) @ used
+            y = Y[:6]
+            y += np.multiply(Y[6:], s, out=Y[6:])
             y /= 1.0 + self._lam_col * s
             np.matmul(self._V, y, out=out[:6])
         else:  # the whole batch in cruise shape: M0^-1 is folded into one matrix
