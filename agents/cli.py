@@ -1,4 +1,4 @@
-"""The ``marine`` command line: demo, simulate, envs."""
+"""The ``marine`` command line: demo, simulate, episode, envs."""
 
 from __future__ import annotations
 
@@ -47,6 +47,23 @@ def _simulate(args: argparse.Namespace) -> int:
     print(f"wrote {len(recording.time)} samples ({recording.time[-1]:.1f} s) of model "
           f"{recording.model!r}: inputs {', '.join(recording.input_names)}; channels "
           f"{', '.join(recording.measured_names)} -> {path}")
+    return 0
+
+
+def _episode(args: argparse.Namespace) -> int:
+    from .episode import run
+
+    env_kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
+    summary = run(args.env, policy=args.policy, seconds=args.seconds, seed=args.seed,
+                  env_kwargs=env_kwargs, plot=args.plot)
+    print(f"{args.env}, policy {args.policy}, seed {args.seed}")
+    for key, value in summary.items():
+        print(f"  {key:<24}{value:>14.6g}")
+    if args.plot:
+        print(f"plot written to {args.plot}")
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump(summary, f, indent=2)
     return 0
 
 
@@ -106,6 +123,25 @@ def build_parser() -> argparse.ArgumentParser:
                      help='environment arguments, SI units, e.g. \'{"hs": 3.0, "tp": 9}\'')
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
     sim.set_defaults(run=_simulate)
+
+    from .episode import EPISODE_POLICIES
+
+    episode = commands.add_parser(
+        "episode", help="run one episode of any environment; print RMS errors, plot it",
+        description="Run one episode of an environment and print its return and the RMS error "
+                    "of every state the task weighs (angles in degrees); with --plot, draw the "
+                    "true and measured states and the inputs against time.")
+    episode.add_argument("env", help="environment id, e.g. marine_envs/ROV-v0")
+    episode.add_argument("--policy", choices=EPISODE_POLICIES, default="lqr-state",
+                         help="lqr-state (LQR on the true state, the default), lqr (on the raw "
+                              "sensors), or an excitation: zero, sine, random, prbs")
+    episode.add_argument("--seconds", type=float, help="episode length, s (the env's own)")
+    episode.add_argument("--seed", type=int, default=0, help="episode seed (0)")
+    episode.add_argument("--plot", metavar="PNG", help="write a figure of the episode")
+    episode.add_argument("--env-kwargs", metavar="JSON",
+                         help='environment arguments, SI units, e.g. \'{"zigzag": "20/20"}\'')
+    episode.add_argument("--json", metavar="PATH", help="also write the summary as JSON")
+    episode.set_defaults(run=_episode)
 
     envs = commands.add_parser("envs", help="list the environments with their spaces")
     envs.set_defaults(run=_envs)

@@ -1,8 +1,9 @@
 """Open-loop excitation signals for identification runs and recordings.
 
 Each signal is a policy with SB3's ``predict`` signature that ignores the observation and
-returns actions in [-1, 1] as a function of the step count; signals that are random draw from
-their own seeded generator.
+returns actions in [-1, 1] as a function of the step count, about a centre (usually the action of
+the vehicle's nominal input, so that the excitation perturbs its trim); signals that are random
+draw from their own seeded generator.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ class Excitation(ABC):
 
     def __init__(self, n_inputs: int, dt: float) -> None:
         self.n_inputs, self.dt, self.k = n_inputs, dt, 0
+        self.centre = np.zeros(n_inputs)
 
     @abstractmethod
     def value(self, t: float) -> NDArray[np.float64]:
@@ -27,13 +29,14 @@ class Excitation(ABC):
 
     def predict(self, observation: Any = None, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[NDArray[np.float32], None]:
-        action = np.clip(self.value(self.k * self.dt), -1.0, 1.0).astype(np.float32)
+        action = np.clip(self.centre + self.value(self.k * self.dt), -1.0, 1.0)
+        action = action.astype(np.float32)
         self.k += 1
         return action, None
 
 
 class Zero(Excitation):
-    """No input (actions 0: the nominal input)."""
+    """No excitation: the centre action (the nominal input) throughout."""
 
     def value(self, t: float) -> NDArray[np.float64]:
         return np.zeros(self.n_inputs)

@@ -19,7 +19,8 @@ POLICIES = (*SIGNALS, "lqr")
 
 
 def make_policy(name: str, env: Any, seed: int | None, **options: float) -> Any:
-    """An excitation signal (``zero``, ``sine``, ``random``, ``prbs``) or ``lqr`` for ``env``."""
+    """An excitation signal (``zero``, ``sine``, ``random``, ``prbs``) about the vehicle's
+    nominal input, or ``lqr`` for ``env``."""
     if name == "lqr":
         return LQRPolicy.for_env(env)
     if name not in SIGNALS:
@@ -27,7 +28,9 @@ def make_policy(name: str, env: Any, seed: int | None, **options: float) -> Any:
     n_inputs = env.action_space.shape[0]
     if name in ("random", "prbs"):
         options = {**options, "seed": seed}
-    return SIGNALS[name](n_inputs, env.unwrapped.dt, **options)
+    signal = SIGNALS[name](n_inputs, env.unwrapped.dt, **options)
+    signal.centre = env.unwrapped.sim.nominal_action()
+    return signal
 
 
 def simulate(env_id: str, steps: int, seed: int | None = None, policy: str = "prbs",

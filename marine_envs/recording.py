@@ -11,7 +11,8 @@ Columns
     one column per model input
         Named as in the model's ``input_names`` (for ``usv``: ``delta``). All are required.
     one column per measured channel
-        Named as in the model's ``state_names`` (for ``usv``: ``v, r, psi, p, phi``). Channels that
+        Named as in the model's ``output_names`` (its states, plus derived outputs such as the DP
+        vessel's measured position; for ``usv``: ``v, r, psi, p, phi``). Channels that
         were not measured are simply absent, but at least one must be present.
 
     No other columns are allowed, every value must be a finite number and there must be at least
@@ -153,10 +154,10 @@ class Recording:
         if inputs.ndim != 2 or inputs.shape[1] != len(vehicle.input_names):
             raise ValueError(f"inputs must have shape (n, {len(vehicle.input_names)}) for columns "
                              f"{', '.join(vehicle.input_names)}; got shape {inputs.shape}")
-        unknown = [name for name in measurements if name not in vehicle.state_names]
+        unknown = [name for name in measurements if name not in vehicle.output_names]
         if unknown:
             raise ValueError(f"unknown measured channel(s) {unknown} for model {model!r}; "
-                             f"allowed: {', '.join(vehicle.state_names)}")
+                             f"allowed: {', '.join(vehicle.output_names)}")
         columns = {TIME: time, **dict(zip(vehicle.input_names, inputs.T, strict=True))}
         columns.update({name: np.asarray(values) for name, values in measurements.items()})
         for name, values in columns.items():
@@ -203,7 +204,7 @@ class Recording:
     @property
     def measured_names(self) -> tuple[str, ...]:
         """Measured channels present in the recording, in model (state) order."""
-        return tuple(n for n in get_model(self.model).state_names if n in self.data.columns)
+        return tuple(n for n in get_model(self.model).output_names if n in self.data.columns)
 
     @property
     def inputs(self) -> np.ndarray:
@@ -432,7 +433,7 @@ def _check_meta(meta: Any) -> None:
 
 def _check_columns(data: pd.DataFrame, vehicle: VehicleModel) -> None:
     columns = list(data.columns)
-    allowed = (TIME, *vehicle.input_names, *vehicle.state_names)
+    allowed = (TIME, *vehicle.input_names, *vehicle.output_names)
     duplicated = sorted({str(c) for c in data.columns[data.columns.duplicated()]})
     if duplicated:
         raise ValueError(f"duplicate column(s) {duplicated}")
@@ -446,15 +447,15 @@ def _check_columns(data: pd.DataFrame, vehicle: VehicleModel) -> None:
     if missing:
         raise ValueError(f"missing input column(s) {missing} for model {vehicle.name!r}; every "
                          f"input is required: {', '.join(vehicle.input_names)}")
-    if not any(name in columns for name in vehicle.state_names):
+    if not any(name in columns for name in vehicle.output_names):
         raise ValueError(f"no measured channel: at least one of the columns "
-                         f"{', '.join(vehicle.state_names)} is required")
+                         f"{', '.join(vehicle.output_names)} is required")
 
 
 def _canonical(data: pd.DataFrame, vehicle: VehicleModel) -> list[str]:
     """Column order of the format: time, inputs, measured channels in model order."""
     present = set(data.columns)
-    measured = [name for name in vehicle.state_names if name in present]
+    measured = [name for name in vehicle.output_names if name in present]
     return [TIME, *vehicle.input_names, *measured]
 
 
@@ -506,7 +507,7 @@ def _check_time(time: np.ndarray, require_uniform: bool) -> None:
 def _si_units(vehicle: VehicleModel) -> dict[str, str]:
     """SI unit of every column the model allows."""
     return {TIME: "s", **dict(zip(vehicle.input_names, vehicle.input_units, strict=True)),
-            **dict(zip(vehicle.state_names, vehicle.state_units, strict=True))}
+            **dict(zip(vehicle.output_names, vehicle.output_units, strict=True))}
 
 
 __all__ = ["METADATA_KEY", "UNIT_CONVERSIONS", "Recording", "read_recording", "write_recording"]

@@ -232,12 +232,15 @@ def test_forces_match_the_scalar_remus_listing_in_cruise_shape():
         np.testing.assert_allclose(fi, expected, rtol=1e-12, atol=1e-11)
 
 
-def test_rhs_matches_the_literal_matrix_form_with_morph_and_current():
-    model = ROVModel()
+@pytest.mark.parametrize("changes", [{}, {"Nvd": 2.5, "Mwd": -1.5}])  # also non-symmetric M_A
+def test_rhs_matches_the_literal_matrix_form_with_morph_and_current(changes):
+    model = ROVModel().with_params(**changes)
     x, u, d = random_batch(200, seed=5)
     got = model.rhs(x, u, d)
     expected = np.array([reference_rhs(model, *args) for args in zip(x, u, d, strict=True)])
     np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-10)
+    one = np.array([model.rhs(*args) for args in zip(x[:20], u[:20], d[:20], strict=True)])
+    np.testing.assert_allclose(one, expected[:20], rtol=1e-10, atol=1e-10)
 
 
 def test_ground_current_inertia_drops_exactly_the_added_mass_current_term():

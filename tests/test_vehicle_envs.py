@@ -11,8 +11,10 @@ from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import SyncVectorEnv
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
+from agents.episode import OnTrueState
 from agents.evaluation import run_episode
 from agents.lqr import LQRPolicy
+from agents.simulate import make_policy
 from marine_envs import ENVIRONMENTS
 from marine_envs.models.rov import THRUSTER_ALLOCATION
 
@@ -134,20 +136,9 @@ def test_lqr_on_the_true_state_does_the_task_better_than_doing_nothing(env_id):
     """The task is achievable and its cost meaningful: LQR (from the model's linearisation, on
     the task's weights) beats the neutral action, and keeps the vehicle alive."""
     env = gym.make(env_id, max_episode_steps=300)
-    lqr = LQRPolicy.for_env(env, observed=None)
-
-    class OnState:
-        """LQR fed the true state from info (the observation is the sensors)."""
-
-        def __init__(self):
-            self.state = None
-
-        def predict(self, obs, deterministic=True):
-            return lqr.predict(env.unwrapped.sim.x[0])
-
-    idle = type("Idle", (), {"predict": lambda self, obs, deterministic=True: (
-        np.zeros(env.action_space.shape, np.float32), None)})()
-    controlled = run_episode(env, OnState(), 300, seed=5)
+    lqr = OnTrueState(env, LQRPolicy.for_env(env, observed=None))
+    idle = make_policy("zero", env, seed=None)  # the nominal input, open loop
+    controlled = run_episode(env, lqr, 300, seed=5)
     neutral = run_episode(env, idle, 300, seed=5)
     assert not controlled.terminated
     assert controlled.episode_return > neutral.episode_return

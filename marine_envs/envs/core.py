@@ -292,6 +292,13 @@ class Simulator:
         f = self.u_mid + self.u_scale * a
         self.u = f if self._allocation is None else f @ self._allocation
 
+    def nominal_action(self) -> FloatArray:
+        """The normalised action that applies the model's nominal input ``u0`` (for thrusters:
+        the least-squares allocation of it)."""
+        matrix = self.actuation.matrix
+        f = self.model.u0 if matrix is None else np.linalg.pinv(matrix) @ self.model.u0
+        return (f - self.u_mid[0]) / self.u_scale[0]
+
     def advance(self) -> tuple[FloatArray, NDArray[np.bool_]]:
         """One control period for every boat: returns ``(reward, failed)``.
 

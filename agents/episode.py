@@ -1,0 +1,115 @@
+"""``marine episode``: run one episode of any environment and plot what happened."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+import marine_envs  # noqa: F401  (registers the environments)
+
+from .evaluation import Episode, run_episode
+from .lqr import LQRPolicy
+from .simulate import POLICIES, make_policy
+
+EPISODE_POLICIES = (*POLICIES, "lqr-state")
+
+
+class OnTrueState:
+    """A policy fed the true state (``info["state"]``) instead of the observation: an oracle
+    baseline, the best an estimator could give the controller."""
+
+    def __init__(self, env: Any, policy: Any) -> None:
+        self.sim, self.policy = env.unwrapped.sim, policy
+
+    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True):
+        return self.policy.predict(self.sim.x[0], deterministic=deterministic)
+
+
+def episode_policy(name: str, env: Any, seed: int | None) -> Any:
+    """A policy of :data:`EPISODE_POLICIES`: ``lqr-state`` is LQR on the true state."""
+    if name == "lqr-state":
+        return OnTrueState(env, LQRPolicy.for_env(env, observed=None))
+    return make_policy(name, env, seed)
+
+
+def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, seed: int = 0,
+        env_kwargs: Mapping[str, Any] | None = None,
+        plot: str | Path | None = None) -> dict[str, float]:
+    """One episode of ``env_id`` under ``policy``; optionally a figure of it.
+
+    :param seconds: episode length, s (default: the environment's own episode).
+    :return: summary: return, steps, terminated, RMS error of each weighted state (SI; angles
+        also in degrees).
+    """
+    if seconds is not None and not (math.isfinite(seconds) and seconds > 0):
+        raise ValueError(f"seconds={seconds!r} is invalid: a positive episode length in s")
+    env = gym.make(env_id, **dict(env_kwargs or {}))
+    sim = env.unwrapped.sim
+    steps = env.spec.max_episode_steps if seconds is None else max(1, round(seconds / sim.dt))
+    env = gym.make(env_id, max_episode_steps=steps, **dict(env_kwargs or {}))
+    sim = env.unwrapped.sim
+    episode = run_episode(env, episode_policy(policy, env, seed), steps, seed=seed)
+    if plot is not None:
+        plot_episode(episode, sim, f"{env_id}, policy {policy}, seed {seed}", Path(plot))
+    return summarise(episode, sim)
+
+
+def summarise(episode: Episode, sim: Any) -> dict[str, float]:
+    """Return, length and the RMS error of each state the task weighs."""
+    summary: dict[str, float] = {"return": episode.episode_return,
+                                 "seconds": len(episode.time) * sim.dt,
+                                 "terminated": float(episode.terminated)}
+    error = episode.states - sim.task.x_ref
+    model = sim.model
+    for i in np.flatnonzero(sim.task.q > 0):
+        rms = float(np.sqrt(np.mean(error[:, i] ** 2)))
+        name, unit = model.state_names[i], model.state_units[i]
+        if unit.startswith("rad"):
+            summary[f"rms_{name}_deg"] = math.degrees(rms)
+        else:
+            summary[f"rms_{name}"] = rms
+    return summary
+
+
+def plot_episode(episode: Episode, sim: Any, title: str, path: Path) -> None:
+    """True and measured values of the weighted states, and the inputs, against time."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    model = sim.model
+    shown = [i for i in np.flatnonzero(sim.task.q > 0)][:4]
+    fig, axes = plt.subplots(len(shown) + 1, 1, figsize=(9, 1.8 * (len(shown) + 1) + 0.6),
+                             sharex=True)
+    for ax, i in zip(axes, shown, strict=False):
+        name, unit = model.state_names[i], model.state_units[i]
+        scale = 180 / math.pi if unit.startswith("rad") else 1.0
+        if name in sim.sensors.channels:
+            measured = episode.observations[:, sim.sensors.channels.index(name)]
+            ax.plot(episode.time, measured * scale, color="tab:orange", lw=0.6, alpha=0.7,
+                    label="measured")
+        ax.plot(episode.time, episode.states[:, i] * scale, color="tab:blue", label="true")
+        ax.axhline(sim.task.x_ref[i] * scale, color="0.5", lw=0.8, ls="--", label="reference")
+        ax.set_ylabel(f"{name}\n({unit.replace('rad', 'deg')})")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8, ncol=3, loc="upper right")
+    low, high = model.u_bounds
+    percent = 100 * (episode.inputs - (low + high) / 2) / ((high - low) / 2)
+    for j, name in enumerate(model.input_names):
+        axes[-1].plot(episode.time, percent[:, j], lw=0.9, label=name)
+    axes[-1].set_ylabel("inputs\n(% of range)")
+    axes[-1].legend(fontsize=8, ncol=len(model.input_names), loc="upper right")
+    axes[-1].grid(alpha=0.3)
+    axes[-1].set_xlabel("time (s)")
+    fig.suptitle(title)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
