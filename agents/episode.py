@@ -91,8 +91,11 @@ def plot_episode(episode: Episode, sim: Any, title: str, path: Path) -> None:
     for ax, i in zip(axes, shown, strict=False):
         name, unit = model.state_names[i], model.state_units[i]
         scale = 180 / math.pi if unit.startswith("rad") else 1.0
-        if name in sim.sensors.channels:
-            measured = episode.observations[:, sim.sensors.channels.index(name)]
+        # the channel measuring this state (the DP vessel measures LF + WF motion as "north")
+        channel = next((c for c in (name, name.removesuffix("_lf")) if c in sim.sensors.channels),
+                       None)
+        if channel is not None:
+            measured = episode.observations[:, sim.sensors.channels.index(channel)]
             ax.plot(episode.time, measured * scale, color="tab:orange", lw=0.6, alpha=0.7,
                     label="measured")
         ax.plot(episode.time, episode.states[:, i] * scale, color="tab:blue", label="true")
