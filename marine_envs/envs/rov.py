@@ -31,7 +31,7 @@ DEFAULT_SENSORS = {
 DEFAULT_STATE_WEIGHTS = {"u": 100.0, "v": 100.0, "w": 100.0, "z": 25.0, "psi": 1 / (5 * DEG) ** 2,
                          "phi": 1 / (10 * DEG) ** 2, "theta": 1 / (10 * DEG) ** 2}
 DEFAULT_INPUT_WEIGHTS = {"X": 1 / 30**2, "Y": 1 / 20**2, "Z": 1 / 20**2, "K": 1.0,
-                         "M": 1 / 7.5**2, "N": 1 / 13.5**2}
+                         "M": 1 / 18.75**2, "N": 1 / 13.5**2}
 
 
 def _actuation(model: ROVModel, mode: str) -> Actuation | None:
@@ -104,10 +104,10 @@ class ROVEnv(MarineEnv):
 
     ## Action Space
     ``Box(-1, 1, (6,), float32)``. With ``actuation="forces"`` (default): generalised forces
-    ``[X, Y, Z, K, M, N]`` over X -40...60 N, Y and Z +-20 N, K +-1 N m (an idealised roll
-    actuator), M +-7.5 N m, N +-13.5 N m. With ``actuation="thrusters"``: the six thruster
-    forces over their limits (stern -20...30 N, tunnels +-10 N), mapped by the allocation
-    matrix B_T (no roll authority). Clipped beyond, flagged in ``info["action_clipped"]``.
+    ``[X, Y, Z, K, M, N]`` over X -40...60 N, Y +-20 N, Z +-50 N, K +-1 N m (an idealised roll
+    actuator), M +-18.75 N m, N +-13.5 N m. With ``actuation="thrusters"``: the six thruster
+    forces over their limits (stern -20...30 N, lateral tunnels +-10 N, vertical tunnels +-25 N),
+    mapped by the allocation matrix B_T (no roll authority). Clipped beyond, flagged in ``info["action_clipped"]``.
 
     ## Observation Space
     ``Box((10,), float32)``: DVL ``u, v, w`` (m/s, std 0.01, sampled at 5 Hz and held), gyro

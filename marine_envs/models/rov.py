@@ -52,8 +52,11 @@ flooded bay (MODELS.md 3.4) is not modelled.
 gives the bounds of X, Y, Z, M and N (the box of each row's reachable range; the jointly reachable
 set is smaller, e.g. X and N share the stern thrusters). Its roll row is zero, so K gets a small
 [PROPOSED] idealised range +-K_max; with thrusters only, roll is left to the BG pendulum.
-In work shape the bow-down moment ``x_G W - x_B B = 11.3 N m`` exceeds the thrusters' pitch range
-(7.5 N m): holding the work-shape boat level needs the seed's variable-structure device.
+In work shape the bow-down moment ``x_G W - x_B B = 11.3 N m`` exceeds the pitch range of
+MODELS.md's +-10 N vertical tunnels (7.5 N m, less the 7 N buoyancy trim they also carry), so the
+vertical tunnels here are rated +-25 N [PROPOSED, deviating from MODELS.md 3.5; a T200-class
+thruster]: the pitch range becomes +-18.75 N m and the level work-shape trim (f5 = -11.3 N,
+f6 = +18.3 N) is reachable, which the seed reaches with its variable-structure device.
 
 **Stability (a property of the cited coefficients, not of this code).** Prestero's damping of
 roll and pitch is quadratic, so at hover the BG pendulums (about 5.6 and 0.85 rad/s in cruise) are
@@ -100,10 +103,11 @@ THRUSTER_DIRECTIONS: FloatArray = np.array([
 #: Allocation matrix B_T (6x6): tau = B_T f, column i = [d_i; r_i x d_i]. Rank 5, zero roll row.
 THRUSTER_ALLOCATION: FloatArray = np.vstack([
     THRUSTER_DIRECTIONS.T, np.cross(THRUSTER_POSITIONS, THRUSTER_DIRECTIONS).T]) + 0.0  # no -0
-#: Thrust limits (low, high) of each thruster, N.
+#: Thrust limits (low, high) of each thruster, N; the vertical tunnels are stronger than MODELS.md's
+#: +-10 N so that the work shape can be trimmed level (see the module docstring).
 THRUSTER_LIMITS: tuple[FloatArray, FloatArray] = (
-    np.array([-20.0, -20.0, -10.0, -10.0, -10.0, -10.0]),
-    np.array([30.0, 30.0, 10.0, 10.0, 10.0, 10.0]))
+    np.array([-20.0, -20.0, -10.0, -10.0, -25.0, -25.0]),
+    np.array([30.0, 30.0, 10.0, 10.0, 25.0, 25.0]))
 for _a in (THRUSTER_POSITIONS, THRUSTER_DIRECTIONS, THRUSTER_ALLOCATION, *THRUSTER_LIMITS):
     _a.flags.writeable = False
 _ALLOCATION_PINV_T = np.linalg.pinv(THRUSTER_ALLOCATION).T
@@ -443,7 +447,7 @@ class ROVModel(VehicleModel):
     @property
     def u_bounds(self) -> tuple[FloatArray, FloatArray]:
         """Box of the thruster layout's reachable range per row (X [-40, 60] N, Y and Z +-20 N,
-        M +-7.5 N m, N +-13.5 N m) and the idealised roll moment +-K_max."""
+        M +-18.75 N m, N +-13.5 N m) and the idealised roll moment +-K_max."""
         return self._u_bounds[0].copy(), self._u_bounds[1].copy()
 
     def coefficients(self, s: float) -> dict[str, float]:
