@@ -1,4 +1,4 @@
-"""The ``marine`` command line: demo, simulate, envs, and their errors."""
+"""The ``marine`` command line: demo, simulate, episode, envs, and their errors."""
 
 import json
 
@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from agents.cli import main
+from marine_envs.models import get_model
 from marine_envs.recording import read_recording
 
 
@@ -61,11 +62,43 @@ def test_envs_lists_the_environments(capsys):
     assert main(["envs"]) == 0
     out = capsys.readouterr().out
     assert "marine_envs/USV-v0" in out and "r, psi, p, phi" in out
+    for name in ("Hydrofoil", "ROV", "DPVessel", "Hovercraft"):
+        assert f"marine_envs/{name}-v0" in out
+
+
+@pytest.mark.parametrize("env, model, channels", [
+    ("Hydrofoil", "hydrofoil", ("xi", "theta", "xi_dot", "theta_dot")),
+    ("ROV", "rov", ("u", "v", "w", "p", "q", "r", "z", "phi", "theta", "psi")),
+    ("DPVessel", "dp_vessel", ("north", "east", "psi")),
+    ("Hovercraft", "hovercraft", ("u", "v", "r", "psi")),
+])
+def test_simulate_records_every_vehicle(tmp_path, env, model, channels):
+    out = tmp_path / "run.csv"
+    assert main(["simulate", "--env", f"marine_envs/{env}-v0", "--steps", "60", "--seed", "1",
+                 "--policy", "sine", "--amplitude", "0.05", "--out", str(out), "--quiet"]) == 0
+    recording = read_recording(out)
+    assert recording.model == model and recording.measured_names == channels
+    assert len(recording.time) == 60 and np.isfinite(recording.measurements).all()
+    # the excitation perturbs the nominal input, it does not replace it
+    nominal = get_model(model).u0
+    assert np.abs(recording.inputs - nominal).max() > 0
+
+
+def test_episode_prints_rms_errors_and_writes_a_plot(tmp_path, capsys):
+    plot = tmp_path / "dp.png"
+    assert main(["episode", "marine_envs/DPVessel-v0", "--seconds", "30", "--plot", str(plot),
+                 "--json", str(tmp_path / "s.json")]) == 0
+    out = capsys.readouterr().out
+    assert "rms_north_lf" in out and plot.stat().st_size > 10_000
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["seconds"] == pytest.approx(30.0) and summary["terminated"] == 0.0
+    assert main(["episode", "marine_envs/ROV-v0", "--seconds", "-1"]) == 2
+    assert "seconds=-1" in capsys.readouterr().err
 
 
 def test_help_explains_every_command(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     out = capsys.readouterr().out
-    for command in ("demo", "simulate", "envs"):
+    for command in ("demo", "simulate", "episode", "envs"):
         assert command in out

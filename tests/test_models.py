@@ -107,3 +107,21 @@ def test_get_model_names_and_errors():
 def test_rhs_rejects_wrong_shapes():
     with pytest.raises(ValueError, match="x must have last axis 5"):
         get_model("usv").rhs(np.zeros(4), np.zeros(1))
+
+
+def test_linearized_model_is_the_affine_model_of_the_nonlinear_one():
+    from marine_envs.models.base import LinearizedModel
+
+    hovercraft = get_model("hovercraft")
+    linear = LinearizedModel(hovercraft)
+    assert linear.is_linear and linear.name == "hovercraft"
+    assert linear.output_names == hovercraft.output_names
+    x, u = hovercraft.x0, hovercraft.u0
+    # exact at the point (where a moving craft's position still changes) ...
+    np.testing.assert_allclose(linear.rhs(x, u), hovercraft.rhs(x, u), atol=1e-9)
+    # ... and first-order accurate near it
+    dx = np.array([0.2, 0.05, 0.002, 0.0, 0.0, 0.01])
+    err = linear.rhs(x + dx, u) - hovercraft.rhs(x + dx, u)
+    err_half = linear.rhs(x + dx / 2, u) - hovercraft.rhs(x + dx / 2, u)
+    assert np.abs(err).max() > 0 and np.abs(err_half).max() < 0.3 * np.abs(err).max()
+    assert linear.with_params(N_Hr=-1e6).A[2, 2] != linear.A[2, 2]

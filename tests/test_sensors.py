@@ -12,6 +12,7 @@ from marine_envs.sensors import (
     Dropout,
     GaussianNoise,
     Quantizer,
+    SampleHold,
     SensorSuite,
     WrapAngle,
     ZoomingQuantizer,
@@ -231,6 +232,35 @@ def test_dropout_first_sample_after_reset_is_valid():
         out = dropout(np.full((2, 2), float(episode)))
         assert dropout.valid[0].all()
         np.testing.assert_array_equal(out[0], float(episode))
+
+
+def test_sample_hold_samples_each_channel_at_its_rate_and_marks_fresh_samples():
+    hold = _bound(SampleHold([1, 3]), batch_size=2)
+    z = np.arange(8, dtype=float)[:, None] * np.ones(2)
+    out = []
+    for k, row in enumerate(z):
+        if k == 2:  # boat 1 starts a new episode: its slow channel samples at once
+            hold.reset(np.array([1]), [np.random.default_rng(0)])
+        out.append(hold(np.stack([row, row])))
+        assert hold.valid[0, 1] == (k % 3 == 0)
+    out = np.array(out)
+    np.testing.assert_array_equal(out[:, 0, 0], z[:, 0])
+    np.testing.assert_array_equal(out[:, 0, 1], [0, 0, 0, 3, 3, 3, 6, 6])
+    np.testing.assert_array_equal(out[:, 1, 1], [0, 0, 2, 2, 2, 5, 5, 5])
+    with pytest.raises(ValueError, match="sample_period"):
+        SampleHold([1, 0.5])
+
+
+def test_suite_mask_combines_slow_sensors_and_dropout():
+    suite = SensorSuite.standard(("a", "b"), sample_period={"a": 2}, dropout={"b": 0.5})
+    suite.bind(1)
+    suite.reset(np.array([0]), [np.random.default_rng(3)])
+    masks = []
+    for _ in range(400):
+        suite.measure(np.zeros((1, 2)))
+        masks.append(suite.valid[0].copy())
+    masks = np.array(masks)
+    assert masks[:, 0].mean() == pytest.approx(0.5) and 0.4 < masks[:, 1].mean() < 0.6
 
 
 @pytest.mark.parametrize("prob", [1.0, 1.5, -0.1])

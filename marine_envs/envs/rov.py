@@ -107,7 +107,8 @@ class ROVEnv(MarineEnv):
     ``[X, Y, Z, K, M, N]`` over X -40...60 N, Y +-20 N, Z +-50 N, K +-1 N m (an idealised roll
     actuator), M +-18.75 N m, N +-13.5 N m. With ``actuation="thrusters"``: the six thruster
     forces over their limits (stern -20...30 N, lateral tunnels +-10 N, vertical tunnels +-25 N),
-    mapped by the allocation matrix B_T (no roll authority). Clipped beyond, flagged in ``info["action_clipped"]``.
+    mapped by the allocation matrix B_T (no roll authority). Clipped beyond, flagged in
+    ``info["action_clipped"]``.
 
     ## Observation Space
     ``Box((10,), float32)``: DVL ``u, v, w`` (m/s, std 0.01, sampled at 5 Hz and held), gyro
