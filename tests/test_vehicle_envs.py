@@ -127,6 +127,8 @@ def test_bad_arguments_name_the_problem(env_id):
         gym.make(env_id, noise_std={"nonsense": 1.0})
     with pytest.raises(ValueError, match="unknown parameter"):
         gym.make(env_id, params={"nonsense": 1.0})
+    with pytest.raises(ValueError, match="unknown argument.*noise_sd"):
+        gym.make(env_id, noise_sd=0.1)
     with pytest.raises(ValueError, match="options\\['state'\\]"):
         gym.make(env_id).reset(seed=0, options={"state": [0.0]})
 

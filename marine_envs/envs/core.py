@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, Literal
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 import scipy.linalg
@@ -66,20 +66,33 @@ def make_task(model: VehicleModel, weights: Mapping[str, float], input_weights: 
                 u_ref=model.u0, low=low, high=high, reward_scale=reward_scale)
 
 
-#: Keyword arguments of :meth:`SensorSuite.standard` that every environment passes through.
-SENSOR_OPTIONS = ("noise_std", "bias", "quantization", "sensor_range", "sample_period", "delay",
-                  "dropout")
+class SensorOptions(TypedDict, total=False):
+    """Sensor settings every environment accepts: per channel, a number for all channels or
+    ``{channel: value}``, SI units (see :meth:`SensorSuite.standard`); None = the default."""
+
+    noise_std: float | Mapping[str, float] | None
+    bias: float | Mapping[str, float] | None
+    quantization: float | Mapping[str, float] | None
+    sensor_range: float | Mapping[str, float] | None
+    sample_period: int | Mapping[str, int] | None
+    delay: int | Mapping[str, int] | None
+    dropout: float | Mapping[str, float] | None
 
 
 def make_sensors(channels: Sequence[str], defaults: Mapping[str, Any],
                  options: Mapping[str, Any], **fixed: Any) -> SensorSuite:
-    """An environment's sensor suite: each of :data:`SENSOR_OPTIONS` from ``options`` when the
-    user gave it (not None), else from the environment's ``defaults``.
+    """An environment's sensor suite: each :class:`SensorOptions` setting from ``options`` when
+    the user gave it (not None), else from the environment's ``defaults``.
 
+    :param options: the environment's remaining keyword arguments; any other name is an error.
     :param fixed: further arguments of :meth:`SensorSuite.standard` (``wrap``, ``quantizer``).
+    :raises ValueError: an unknown argument, naming it.
     """
+    unknown = sorted(set(options) - set(SensorOptions.__annotations__))
+    if unknown:
+        raise ValueError(f"unknown argument(s) {unknown}; see the environment's docstring")
     chosen = {k: defaults.get(k) if options.get(k) is None else options[k]
-              for k in SENSOR_OPTIONS}
+              for k in SensorOptions.__annotations__}
     return SensorSuite.standard(channels, **chosen, **fixed)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Unpack
 
 import numpy as np
 import scipy.linalg
@@ -12,7 +12,14 @@ import scipy.linalg
 from ..models.dp_vessel import DPVesselModel
 from ..sea.processes import GaussMarkov
 from .base import MarineEnv, MarineVectorEnv
-from .core import InitialState, Simulator, make_sensors, make_task, uniform_initial_state
+from .core import (
+    InitialState,
+    SensorOptions,
+    Simulator,
+    make_sensors,
+    make_task,
+    uniform_initial_state,
+)
 
 DEG = math.pi / 180
 #: Position reference and gyrocompass: position sigma from seed 003's R_ident = 1e-3 m^2; the
@@ -51,25 +58,17 @@ def make_dp_simulator(
     dt: float = 0.5,
     params: Mapping[str, Any] | None = None,
     setpoint: Mapping[str, float] | None = None,
-    noise_std: float | Mapping[str, float] | None = None,
-    quantization: float | Mapping[str, float] | None = None,
-    sensor_range: Mapping[str, float] | None = None,
-    bias: float | Mapping[str, float] | None = None,
-    sample_period: int | Mapping[str, int] | None = None,
-    delay: int | Mapping[str, int] | None = None,
-    dropout: float | Mapping[str, float] | None = None,
     initial_spread: Mapping[str, float] | None = None,
     state_weights: Mapping[str, float] | None = None,
     input_weights: Mapping[str, float] | None = None,
     max_offset: float = 50.0,
     disturbance_seed: int | None = None,
+    **sensor_options: Unpack[SensorOptions],
 ) -> Simulator:
     """The DP simulator; the keyword arguments are those of :class:`DPVesselEnv` (see there)."""
     model = DPVesselModel().with_params(**(params or {}))
     sensors = make_sensors(
-        DPVesselModel.measured_names, DEFAULT_SENSORS,
-        dict(noise_std=noise_std, quantization=quantization, sensor_range=sensor_range,
-             bias=bias, sample_period=sample_period, delay=delay, dropout=dropout),
+        DPVesselModel.measured_names, DEFAULT_SENSORS, sensor_options,
         wrap=("psi",))
     unknown = sorted(set(setpoint or {}) - set(SETPOINT_STATES))
     if unknown:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import Any, Unpack
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -14,7 +14,7 @@ from ..manoeuvres import ZigzagRudder
 from ..models.hovercraft import HovercraftModel
 from ..sea.processes import GaussMarkov
 from .base import MarineEnv, MarineVectorEnv
-from .core import Simulator, make_sensors, make_task, uniform_initial_state
+from .core import SensorOptions, Simulator, make_sensors, make_task, uniform_initial_state
 
 DEG = math.pi / 180
 #: Doppler/GNSS speed log and fibre-optic gyro [PROPOSED]: noise std per channel, SI units.
@@ -73,24 +73,16 @@ def make_hovercraft_simulator(
     wind_gust: float = 1.0,
     wind_time_constant: float = 20.0,
     zigzag: str | Sequence[float] | None = None,
-    noise_std: float | Mapping[str, float] | None = None,
-    quantization: float | Mapping[str, float] | None = None,
-    sensor_range: Mapping[str, float] | None = None,
-    bias: float | Mapping[str, float] | None = None,
-    sample_period: int | Mapping[str, int] | None = None,
-    delay: int | Mapping[str, int] | None = None,
-    dropout: float | Mapping[str, float] | None = None,
     initial_spread: Mapping[str, float] | None = None,
     state_weights: Mapping[str, float] | None = None,
     input_weights: Mapping[str, float] | None = None,
     disturbance_seed: int | None = None,
+    **sensor_options: Unpack[SensorOptions],
 ) -> Simulator:
     """The hovercraft simulator; the keyword arguments are those of :class:`HovercraftEnv`."""
     model = HovercraftModel().with_params(**(params or {}))
     sensors = make_sensors(
-        ("u", "v", "r", "psi"), DEFAULT_SENSORS,
-        dict(noise_std=noise_std, quantization=quantization, sensor_range=sensor_range,
-             bias=bias, sample_period=sample_period, delay=delay, dropout=dropout),
+        ("u", "v", "r", "psi"), DEFAULT_SENSORS, sensor_options,
         wrap=("psi",))
     if not math.isfinite(course):
         raise ValueError(f"course={course!r} is invalid: a finite heading in rad")

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, Literal
+from typing import Any, Literal, Unpack
 
 from ..models.base import LinearizedModel
 from ..models.hydrofoil import HydrofoilModel
 from ..sea import SeaState, WaveRealisation, wave_coupling
 from .base import MarineEnv, MarineVectorEnv
-from .core import Simulator, make_sensors, make_task, uniform_initial_state
+from .core import SensorOptions, Simulator, make_sensors, make_task, uniform_initial_state
 
 DEG = math.pi / 180
 #: Seed 001: C = I4 and measurement noise variance WR = 0.003 on every channel.
@@ -39,18 +39,12 @@ def make_hydrofoil_simulator(
     n_wave_components: int = 100,
     waves: bool = True,
     rich_waves: bool = False,
-    noise_std: float | Mapping[str, float] | None = None,
-    quantization: float | Mapping[str, float] | None = None,
-    sensor_range: Mapping[str, float] | None = None,
-    bias: float | Mapping[str, float] | None = None,
-    sample_period: int | Mapping[str, int] | None = None,
-    delay: int | Mapping[str, int] | None = None,
-    dropout: float | Mapping[str, float] | None = None,
     initial_spread: Mapping[str, float] | None = None,
     state_weights: Mapping[str, float] | None = None,
     input_weights: Mapping[str, float] | None = None,
     max_pitch: float = 15 * DEG,
     disturbance_seed: int | None = None,
+    **sensor_options: Unpack[SensorOptions],
 ) -> Simulator:
     """The hydrofoil simulator; the keyword arguments are those of :class:`HydrofoilEnv`."""
     craft = HydrofoilModel().with_params(**(params or {}))
@@ -58,9 +52,7 @@ def make_hydrofoil_simulator(
         raise ValueError(f"model={model!r} is invalid: 'nonlinear' or 'linear'")
     vehicle = craft if model == "nonlinear" else LinearizedModel(craft)
     sensors = make_sensors(
-        vehicle.state_names, DEFAULT_SENSORS,
-        dict(noise_std=noise_std, quantization=quantization, sensor_range=sensor_range,
-             bias=bias, sample_period=sample_period, delay=delay, dropout=dropout))
+        vehicle.state_names, DEFAULT_SENSORS, sensor_options)
     if not (math.isfinite(max_pitch) and max_pitch > 0):
         raise ValueError(f"max_pitch={max_pitch!r} is invalid: must be > 0 rad")
     # foils broach when the CG is about a strut length above the surface; the hull touches the

@@ -4,14 +4,21 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any, Literal
+from typing import Any, Literal, Unpack
 
 import numpy as np
 
 from ..models.rov import THRUSTER_ALLOCATION, THRUSTER_LIMITS, ROVModel
 from ..sea.processes import GaussMarkov, Stacked, StepEvent
 from .base import MarineEnv, MarineVectorEnv
-from .core import Actuation, Simulator, make_sensors, make_task, uniform_initial_state
+from .core import (
+    Actuation,
+    SensorOptions,
+    Simulator,
+    make_sensors,
+    make_task,
+    uniform_initial_state,
+)
 
 DEG = math.pi / 180
 CHANNELS = ("u", "v", "w", "phi", "theta", "psi", "p", "q", "r", "z")
@@ -54,24 +61,16 @@ def make_rov_simulator(
     current_time_constant: float = 120.0,
     morph_time: float | None = None,
     morph_window: tuple[float, float] | None = (20.0, 80.0),
-    noise_std: float | Mapping[str, float] | None = None,
-    quantization: float | Mapping[str, float] | None = None,
-    sensor_range: Mapping[str, float] | None = None,
-    bias: float | Mapping[str, float] | None = None,
-    sample_period: int | Mapping[str, int] | None = None,
-    delay: int | Mapping[str, int] | None = None,
-    dropout: float | Mapping[str, float] | None = None,
     initial_spread: Mapping[str, float] | None = None,
     state_weights: Mapping[str, float] | None = None,
     input_weights: Mapping[str, float] | None = None,
     disturbance_seed: int | None = None,
+    **sensor_options: Unpack[SensorOptions],
 ) -> Simulator:
     """The ROV simulator; the keyword arguments are those of :class:`ROVEnv` (see there)."""
     model = ROVModel().with_params(**(params or {}))
     sensors = make_sensors(
-        CHANNELS, DEFAULT_SENSORS,
-        dict(noise_std=noise_std, quantization=quantization, sensor_range=sensor_range,
-             bias=bias, sample_period=sample_period, delay=delay, dropout=dropout),
+        CHANNELS, DEFAULT_SENSORS, sensor_options,
         wrap=("psi",))
     task = make_task(model, DEFAULT_STATE_WEIGHTS if state_weights is None else state_weights,
                      DEFAULT_INPUT_WEIGHTS if input_weights is None else input_weights,

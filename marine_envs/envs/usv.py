@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, Literal
+from typing import Any, Literal, Unpack
 
 from ..models import USVModel
 from ..sea import MeasuredSpectrum, SeaState, WaveRealisation, wave_coupling
 from .base import MarineEnv, MarineVectorEnv
-from .core import Simulator, make_sensors, make_task, uniform_initial_state
+from .core import SensorOptions, Simulator, make_sensors, make_task, uniform_initial_state
 from .rendering import USVRenderer
 
 DEG = math.pi / 180
@@ -38,27 +38,19 @@ def make_usv_simulator(
     n_wave_components: int = 64,
     waves: bool = True,
     coupling: Mapping[str, float] | None = None,
-    noise_std: float | Mapping[str, float] | None = None,
-    quantization: float | Mapping[str, float] | None = None,
-    sensor_range: Mapping[str, float] | None = None,
     quantizer: Literal["static", "zooming"] = "static",
     zoom_k: float = 0.6,
-    bias: float | Mapping[str, float] | None = None,
-    sample_period: int | Mapping[str, int] | None = None,
-    delay: int | Mapping[str, int] | None = None,
-    dropout: float | Mapping[str, float] | None = None,
     initial_spread: Mapping[str, float] | None = None,
     state_weights: Mapping[str, float] | None = None,
     input_weights: Mapping[str, float] | None = None,
     max_roll: float = 40 * DEG,
     disturbance_seed: int | None = None,
+    **sensor_options: Unpack[SensorOptions],
 ) -> Simulator:
     """The USV simulator; the keyword arguments are those of :class:`USVEnv` (see there)."""
     model = USVModel().with_params(**(params or {}))
     sensors = make_sensors(
-        USVModel.measured_names, DEFAULT_SENSORS,
-        dict(noise_std=noise_std, quantization=quantization, sensor_range=sensor_range,
-             sample_period=sample_period, bias=bias, delay=delay, dropout=dropout),
+        USVModel.measured_names, DEFAULT_SENSORS, sensor_options,
         wrap=("psi",), quantizer=quantizer, zoom_k=zoom_k)
     if not (math.isfinite(max_roll) and max_roll > 0):
         raise ValueError(f"max_roll={max_roll!r} is invalid: must be > 0 rad")
