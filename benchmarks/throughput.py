@@ -27,18 +27,21 @@ TARGETS = {("USV", "single"): (0.3, 0.6), ("USV", 1024): (0.25, 0.5), ("ROV", 10
 SHORT = {env_id.split("/")[1].removesuffix("-v0"): env_id for env_id in ENVIRONMENTS}
 
 
-def _neutral_action(space: gym.Space) -> np.ndarray | int:
-    """A valid action that keeps the episode going: the middle of a Box, 1 for CartPole."""
-    if isinstance(space, gym.spaces.Box):
-        return np.zeros(space.shape, dtype=np.float32)
-    return np.ones(space.shape, dtype=np.int64) if space.shape else 1
+def _neutral_action(env: gym.Env | gym.vector.VectorEnv) -> np.ndarray | int:
+    """An action that keeps episodes going: the nominal input of a marine vehicle (its trim),
+    1 for CartPole."""
+    sim = getattr(env.unwrapped, "sim", None)
+    if sim is None:
+        space = env.action_space
+        return np.ones(space.shape, dtype=np.int64) if space.shape else 1
+    return np.broadcast_to(sim.nominal_action(), env.action_space.shape).astype(np.float32)
 
 
 def single_stepper(env_id: str) -> Callable[[int], float]:
     """Seconds to run n steps of ``gym.make(env_id)`` (with its standard wrappers)."""
     env = gym.make(env_id)
     env.reset(seed=0)
-    action = _neutral_action(env.action_space)
+    action = _neutral_action(env)
 
     def run(n: int) -> float:
         start = time.perf_counter()
@@ -55,7 +58,7 @@ def vector_stepper(env_id: str, num_envs: int) -> Callable[[int], float]:
     """Seconds to run n steps of the native vector env (auto-resets included)."""
     env = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point")
     env.reset(seed=0)
-    action = _neutral_action(env.action_space)
+    action = _neutral_action(env)
 
     def run(n: int) -> float:
         start = time.perf_counter()

@@ -143,12 +143,20 @@ class RK4:
     def __call__(self, xud: FloatArray) -> FloatArray:
         f, h = self.rhs, self.h
         x, u, d = np.split(xud, [self.n_x, self.n_x + self.n_u], axis=1)
-        for _ in range(self.substeps):
-            k1 = f(x, u, d)
-            k2 = f(x + 0.5 * h * k1, u, d)
-            k3 = f(x + 0.5 * h * k2, u, d)
-            k4 = f(x + h * k3, u, d)
-            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        for i in range(self.substeps):
+            k = f(x, u, d)
+            if i == 0 and k.flags.f_contiguous and not x.flags.f_contiguous:
+                # a model working on state rows returns a transposed array: mixing memory
+                # layouts would make every update below a slow strided loop
+                x = np.asfortranarray(x)
+            total = k.copy()
+            k = f(x + 0.5 * h * k, u, d)
+            total += 2 * k
+            k = f(x + 0.5 * h * k, u, d)
+            total += 2 * k
+            k = f(x + h * k, u, d)
+            total += k
+            x = x + h / 6 * total
         if not np.isfinite(x).all():
             bad = int(np.flatnonzero(~np.isfinite(x).all(axis=1))[0])
             raise FloatingPointError(f"simulation diverged: non-finite state {x[bad]} of boat "
@@ -217,6 +225,8 @@ class Simulator:
             raise ValueError(f"integrator='exact' needs a linear model; {model.name!r} is not")
         if integrator not in ("exact", "rk4"):
             raise ValueError(f"integrator={integrator!r} is invalid: 'exact' or 'rk4'")
+        if not (isinstance(substeps, int) and substeps >= 1):
+            raise ValueError(f"substeps={substeps!r} is invalid: an integer >= 1")
         unknown = sorted(set(sensors.channels) - set(model.output_names))
         if unknown:
             raise ValueError(f"sensor channel(s) {unknown} are not outputs of model "

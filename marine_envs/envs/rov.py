@@ -64,6 +64,7 @@ def make_rov_simulator(
     initial_spread: Mapping[str, float] | None = None,
     state_weights: Mapping[str, float] | None = None,
     input_weights: Mapping[str, float] | None = None,
+    substeps: int = 2,
     disturbance_seed: int | None = None,
     **sensor_options: Unpack[SensorOptions],
 ) -> Simulator:
@@ -86,7 +87,7 @@ def make_rov_simulator(
     spread = {"u": 0.3, "v": 0.1, "z": 1.0, "psi": 20 * DEG} if initial_spread is None \
         else initial_spread
     return Simulator(model, sensors, task, Stacked(flow, morph), dt,
-                     uniform_initial_state(model, spread), integrator="rk4", substeps=2,
+                     uniform_initial_state(model, spread), integrator="rk4", substeps=substeps,
                      disturbance_seed=disturbance_seed, actuation=_actuation(model, actuation))
 
 
@@ -147,6 +148,8 @@ class ROVEnv(MarineEnv):
       steps per sample), ``delay``, ``dropout``: per channel, a number or ``{channel: value}``.
     * ``initial_spread``: ``{state: half-width}`` of the uniform initial state.
     * ``state_weights``, ``input_weights``: ``{name: weight}`` of the task cost.
+    * ``substeps``: RK4 steps per control period (2; 1 is about 1.7x faster, with errors of
+      1e-4 m/s and 2e-3 rad/s against a fine solution under LQR).
     * ``disturbance_seed``: if set, every episode sees the same current and morph time.
     """
 
