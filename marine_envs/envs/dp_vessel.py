@@ -67,9 +67,8 @@ def make_dp_simulator(
 ) -> Simulator:
     """The DP simulator; the keyword arguments are those of :class:`DPVesselEnv` (see there)."""
     model = DPVesselModel().with_params(**(params or {}))
-    sensors = make_sensors(
-        DPVesselModel.measured_names, DEFAULT_SENSORS, sensor_options,
-        wrap=("psi",))
+    sensors = make_sensors(DPVesselModel.measured_names, DEFAULT_SENSORS, sensor_options,
+                           wrap=("psi",))
     unknown = sorted(set(setpoint or {}) - set(SETPOINT_STATES))
     if unknown:
         raise ValueError(f"setpoint: unknown key(s) {unknown}; known: north, east, psi")

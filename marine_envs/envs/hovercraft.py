@@ -81,9 +81,7 @@ def make_hovercraft_simulator(
 ) -> Simulator:
     """The hovercraft simulator; the keyword arguments are those of :class:`HovercraftEnv`."""
     model = HovercraftModel().with_params(**(params or {}))
-    sensors = make_sensors(
-        ("u", "v", "r", "psi"), DEFAULT_SENSORS, sensor_options,
-        wrap=("psi",))
+    sensors = make_sensors(("u", "v", "r", "psi"), DEFAULT_SENSORS, sensor_options, wrap=("psi",))
     if not math.isfinite(course):
         raise ValueError(f"course={course!r} is invalid: a finite heading in rad")
     task = make_task(model, DEFAULT_STATE_WEIGHTS if state_weights is None else state_weights,

@@ -51,8 +51,7 @@ def make_hydrofoil_simulator(
     if model not in ("nonlinear", "linear"):
         raise ValueError(f"model={model!r} is invalid: 'nonlinear' or 'linear'")
     vehicle = craft if model == "nonlinear" else LinearizedModel(craft)
-    sensors = make_sensors(
-        vehicle.state_names, DEFAULT_SENSORS, sensor_options)
+    sensors = make_sensors(vehicle.state_names, DEFAULT_SENSORS, sensor_options)
     if not (math.isfinite(max_pitch) and max_pitch > 0):
         raise ValueError(f"max_pitch={max_pitch!r} is invalid: must be > 0 rad")
     # foils broach when the CG is about a strut length above the surface; the hull touches the

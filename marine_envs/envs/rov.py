@@ -70,9 +70,7 @@ def make_rov_simulator(
 ) -> Simulator:
     """The ROV simulator; the keyword arguments are those of :class:`ROVEnv` (see there)."""
     model = ROVModel().with_params(**(params or {}))
-    sensors = make_sensors(
-        CHANNELS, DEFAULT_SENSORS, sensor_options,
-        wrap=("psi",))
+    sensors = make_sensors(CHANNELS, DEFAULT_SENSORS, sensor_options, wrap=("psi",))
     task = make_task(model, DEFAULT_STATE_WEIGHTS if state_weights is None else state_weights,
                      DEFAULT_INPUT_WEIGHTS if input_weights is None else input_weights,
                      reference=reference,
