@@ -52,8 +52,7 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     env = gym.make(env_id, **dict(env_kwargs or {}))
     sim = env.unwrapped.sim
     steps = env.spec.max_episode_steps if seconds is None else max(1, round(seconds / sim.dt))
-    env = gym.make(env_id, max_episode_steps=steps, **dict(env_kwargs or {}))
-    sim = env.unwrapped.sim
+    env = gym.wrappers.TimeLimit(env.unwrapped, steps)  # the requested length, not the spec's
     episode = run_episode(env, episode_policy(policy, env, seed), steps, seed=seed)
     if plot is not None:
         plot_episode(episode, sim, f"{env_id}, policy {policy}, seed {seed}", Path(plot))
@@ -77,6 +76,18 @@ def summarise(episode: Episode, sim: Any) -> dict[str, float]:
     return summary
 
 
+def _measuring_channel(sim: Any, state: int) -> int | None:
+    """The sensor channel whose output moves with state ``state`` (itself, or e.g. the DP
+    vessel's measured ``north`` = LF + WF motion for ``north_lf``), or None."""
+    model = sim.model
+    x = model.x0[None].repeat(2, axis=0)
+    x[1, state] += 1.0
+    y = model.output(x)
+    channels = [model.output_names.index(c) for c in sim.sensors.channels]
+    moved = np.flatnonzero(y[1, channels] != y[0, channels])
+    return int(moved[0]) if moved.size else None
+
+
 def plot_episode(episode: Episode, sim: Any, title: str, path: Path) -> None:
     """True and measured values of the weighted states, and the inputs, against time."""
     import matplotlib
@@ -91,11 +102,9 @@ def plot_episode(episode: Episode, sim: Any, title: str, path: Path) -> None:
     for ax, i in zip(axes, shown, strict=False):
         name, unit = model.state_names[i], model.state_units[i]
         scale = 180 / math.pi if unit.startswith("rad") else 1.0
-        # the channel measuring this state (the DP vessel measures LF + WF motion as "north")
-        channel = next((c for c in (name, name.removesuffix("_lf")) if c in sim.sensors.channels),
-                       None)
+        channel = _measuring_channel(sim, i)
         if channel is not None:
-            measured = episode.observations[:, sim.sensors.channels.index(channel)]
+            measured = episode.observations[:, channel]
             ax.plot(episode.time, measured * scale, color="tab:orange", lw=0.6, alpha=0.7,
                     label="measured")
         ax.plot(episode.time, episode.states[:, i] * scale, color="tab:blue", label="true")

@@ -303,12 +303,16 @@ class Simulator:
         a = a.reshape(shape).astype(np.float64, copy=False)
         # numpy reductions have microseconds of overhead: small actions are checked in Python
         # (a sum, not a max: max() skips a NaN that is not first)
-        magnitudes = np.abs(a)
-        total = sum(magnitudes.ravel().tolist()) if a.size <= 64 else magnitudes.sum()
+        if a.size <= 64:
+            values = [abs(v) for v in a.ravel().tolist()]
+            total, peak = sum(values), max(values)
+        else:
+            magnitudes = np.abs(a)
+            total, peak = magnitudes.sum(), magnitudes.max()
         if not math.isfinite(total):
             raise ValueError(f"action contains NaN or inf: {a.tolist()!r}")
-        if total > 1.0 and magnitudes.max() > 1.0:
-            self.clipped = (magnitudes > 1.0).any(axis=1)
+        if peak > 1.0:
+            self.clipped = (np.abs(a) > 1.0).any(axis=1)
             a = np.clip(a, -1.0, 1.0)
         else:
             self.clipped = self._never_clipped
