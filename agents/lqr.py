@@ -1,107 +1,564 @@
 """LQR from a model's linearisation, acting on whatever the environment observes.
 
-The gain minimises the environment's own stage cost ``x'Qx + u'Ru`` (same Q, R), so LQR and RL
-agents are compared on one number. The policy has Stable-Baselines3's ``predict`` signature, so
-one evaluation loop runs both.
+Conventions (as python-control's ``lqr``/``dlqr``): ``u = u_ref - K (x - x_ref)``; the
+continuous design minimises ``integral x'Qx + u'Ru dt`` for ``x_dot = A x + B u``; the discrete
+design minimises ``sum_k x_k'Q x_k + u_k'R u_k`` for the zero-order-hold (ZOH) discretisation of
+that model with period ``dt``. The environments' stage cost is exactly the discrete one (same Q,
+R), so LQR and RL agents are compared on one number.
+
+Integral action augments the state with ``z`` per integrated state ``i``:
+``z_dot = x_i - x_ref_i`` (continuous) or ``z_{k+1} = z_k + dt (x_i - x_ref_i)`` (discrete), and
+``u = u_ref - K_x (x - x_ref) - K_z z``; it removes the steady offset a constant disturbance
+leaves. The policy keeps ``z`` per batch row, with conditional integration as anti-windup.
+
+:class:`LQRPolicy` has Stable-Baselines3's ``predict`` signature, so one evaluation loop runs LQR
+and SB3 policies.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
+FloatArray = NDArray[np.float64]
+Observed = Literal["auto", "sensors", "state"] | None
 
-def lqr_gain(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike,
-             dt: float | None = None) -> NDArray[np.float64]:
-    """State-feedback gain K of ``u = -K x``.
 
-    :param A, B: continuous-time model ``x_dot = A x + B u``.
-    :param Q, R: state and input weights (Q >= 0, R > 0).
-    :param dt: if given, the discrete LQR of the zero-order-hold discretisation with period
-        ``dt`` (s), minimising ``sum_k x_k'Q x_k + u_k'R u_k``; else the continuous LQR.
-    :raises ValueError: shapes that do not match, or R not positive definite.
+class LQRSolution(NamedTuple):
+    """Result of an LQR design; unpacks as ``K, P, poles`` (python-control's ``K, S, E``).
+
+    :param K: gain of ``u = -K x``, ``(n_u, n_x)``.
+    :param P: the Riccati solution (cost-to-go ``x'Px``), ``(n_x, n_x)``.
+    :param poles: closed-loop eigenvalues: of ``A - BK`` (1/s) for a continuous design, of
+        ``Ad - Bd K`` (z-plane, dimensionless) for a discrete one.
     """
-    A, B, Q, R = (np.atleast_2d(np.asarray(m, dtype=float)) for m in (A, B, Q, R))
+
+    K: FloatArray
+    P: FloatArray
+    poles: NDArray[np.complex128]
+
+
+# -- designs -------------------------------------------------------------------------------------
+def zoh(A: ArrayLike, B: ArrayLike, dt: float) -> tuple[FloatArray, FloatArray]:
+    """Zero-order-hold discretisation ``(Ad, Bd)`` of ``x_dot = A x + B u`` with period ``dt``
+    (s): exact for inputs held over each period."""
+    A, B = _matrix("A", A), _matrix("B", B)
+    dt = _period(dt)
     n, m = B.shape
-    if A.shape != (n, n) or Q.shape != (n, n) or R.shape != (m, m):
-        raise ValueError(f"shapes do not match: A {A.shape}, B {B.shape}, Q {Q.shape}, "
-                         f"R {R.shape}")
-    if np.linalg.eigvalsh((R + R.T) / 2).min() <= 0:
-        raise ValueError("R must be positive definite")
-    if dt is None:
-        P = scipy.linalg.solve_continuous_are(A, B, Q, R)
-        return np.linalg.solve(R, B.T @ P)
+    if A.shape != (n, n):
+        raise ValueError(f"shapes do not match: A {A.shape}, B {B.shape}")
     block = np.zeros((n + m, n + m))
     block[:n, :n], block[:n, n:] = A, B
     phi = scipy.linalg.expm(block * dt)
-    Ad, Bd = phi[:n, :n], phi[:n, n:]
-    P = scipy.linalg.solve_discrete_are(Ad, Bd, Q, R)
-    return np.linalg.solve(R + Bd.T @ P @ Bd, Bd.T @ P @ Ad)
+    return phi[:n, :n], phi[:n, n:]
 
 
+def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike,
+        dt: float | None = None) -> LQRSolution:
+    """LQR of ``x_dot = A x + B u``: continuous if ``dt`` is None, else the discrete LQR of its
+    ZOH discretisation with period ``dt`` (s).
+
+    :param A, B: continuous-time model, ``(n, n)`` and ``(n, m)``.
+    :param Q, R: state and input weights, ``(n, n)`` symmetric >= 0 and ``(m, m)`` symmetric > 0.
+    :raises ValueError: shapes that do not match, non-finite entries, Q not positive
+        semi-definite, R not positive definite, ``(A, B)`` not stabilisable, or a marginal mode
+        that Q does not see (no stabilising Riccati solution); the message names the mode.
+    """
+    A, B, Q, R = _check_design(A, B, Q, R)
+    if dt is None:
+        return _solve(A, B, Q, R, discrete=False)
+    Ad, Bd = zoh(A, B, dt)
+    return _solve(Ad, Bd, Q, R, discrete=True)
+
+
+def dlqr(Ad: ArrayLike, Bd: ArrayLike, Q: ArrayLike, R: ArrayLike) -> LQRSolution:
+    """Discrete LQR of ``x_{k+1} = Ad x_k + Bd u_k`` minimising ``sum_k x_k'Q x_k + u_k'R u_k``.
+
+    :raises ValueError: as :func:`lqr`.
+    """
+    return _solve(*_check_design(Ad, Bd, Q, R), discrete=True)
+
+
+def lqr_gain(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike,
+             dt: float | None = None) -> FloatArray:
+    """State-feedback gain K of ``u = -K x`` (see :func:`lqr`, whose ``K`` it is)."""
+    return lqr(A, B, Q, R, dt).K
+
+
+def lqr_integral(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike,
+                 integrated: Sequence[int], weights: ArrayLike,
+                 dt: float | None = None) -> LQRSolution:
+    """LQR with integral action on states ``integrated``.
+
+    The model is augmented with ``z_dot = x_i`` (continuous, ``dt`` None) or, for the ZOH model,
+    ``z_{k+1} = z_k + dt x_i`` (discrete), in deviation variables; the augmented state
+    ``[x, z]`` is weighted by ``blockdiag(Q, diag(weights))``.
+
+    :param integrated: indices of the integrated states (each once).
+    :param weights: LQR weight of each integral state, > 0 (units 1/(state unit * s)^2).
+    :return: the augmented solution; ``K[:, :n]`` acts on ``x``, ``K[:, n:]`` on ``z``.
+    :raises ValueError: as :func:`lqr`; also bad indices or weights, or a pair that integral
+        action makes unstabilisable (an integrated state the inputs cannot hold away from its
+        equilibrium, i.e. a transmission zero at s = 0).
+    """
+    A, B, Q, R = _check_design(A, B, Q, R)
+    n, m = B.shape
+    idx = np.asarray(integrated, dtype=int).reshape(-1)
+    w = np.asarray(weights, dtype=float).reshape(-1)
+    if idx.size == 0 or len(set(idx.tolist())) != idx.size or idx.min() < 0 or idx.max() >= n:
+        raise ValueError(f"integrated={idx.tolist()} is invalid: distinct state indices in "
+                         f"[0, {n})")
+    if w.shape != idx.shape or not np.all(np.isfinite(w) & (w > 0)):
+        raise ValueError(f"weights={w.tolist()} is invalid: one finite weight > 0 per integrated "
+                         "state")
+    C = np.zeros((idx.size, n))
+    C[np.arange(idx.size), idx] = 1.0
+    n_z = idx.size
+    Q_aug = scipy.linalg.block_diag(Q, np.diag(w))
+    B_aug = np.vstack([B, np.zeros((n_z, m))])
+    if dt is None:
+        A_aug = np.block([[A, np.zeros((n, n_z))], [C, np.zeros((n_z, n_z))]])
+        return _solve(A_aug, B_aug, Q_aug, R, discrete=False)
+    Ad, Bd = zoh(A, B, dt)
+    # the integrator is advanced with the error of the period's start, as the policy does
+    A_aug = np.block([[Ad, np.zeros((n, n_z))], [dt * C, np.eye(n_z)]])
+    B_aug[:n] = Bd
+    return _solve(A_aug, B_aug, Q_aug, R, discrete=True)
+
+
+def _matrix(name: str, value: ArrayLike) -> FloatArray:
+    a = np.atleast_2d(np.asarray(value, dtype=float))
+    if a.ndim != 2:
+        raise ValueError(f"{name} must be a matrix, got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name} has non-finite entries")
+    return a
+
+
+def _period(dt: Any) -> float:
+    if not (isinstance(dt, int | float | np.floating | np.integer) and np.isfinite(dt)
+            and dt > 0):
+        raise ValueError(f"dt={dt!r} is invalid: a period > 0 s")
+    return float(dt)
+
+
+def _check_design(A: ArrayLike, B: ArrayLike, Q: ArrayLike,
+                  R: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The four matrices as float arrays, or a ValueError naming the one that is wrong."""
+    A, B, Q, R = (_matrix(k, v) for k, v in zip("ABQR", (A, B, Q, R), strict=True))
+    n, m = B.shape
+    if A.shape != (n, n) or Q.shape != (n, n) or R.shape != (m, m):
+        raise ValueError(f"shapes do not match: A {A.shape}, B {B.shape}, Q {Q.shape}, "
+                         f"R {R.shape}; expected ({n}, {n}), (n, m), ({n}, {n}), ({m}, {m})")
+    for name, W in (("Q", Q), ("R", R)):
+        scale = max(1.0, np.abs(W).max())
+        if not np.allclose(W, W.T, rtol=0, atol=1e-12 * scale):
+            raise ValueError(f"{name} must be symmetric")
+    lowest = np.linalg.eigvalsh(Q).min()
+    if lowest < -1e-12 * max(1.0, np.abs(Q).max()):
+        raise ValueError(f"Q must be positive semi-definite (smallest eigenvalue {lowest:.3g})")
+    lowest = np.linalg.eigvalsh(R).min()
+    if lowest <= 0:
+        raise ValueError(f"R must be positive definite (smallest eigenvalue {lowest:.3g})")
+    return A, B, Q, R
+
+
+def _solve(A: FloatArray, B: FloatArray, Q: FloatArray, R: FloatArray,
+           discrete: bool) -> LQRSolution:
+    """Solve the Riccati equation; turn scipy's failures into a ValueError that says why."""
+    try:
+        if discrete:
+            P = scipy.linalg.solve_discrete_are(A, B, Q, R)
+            K = np.linalg.solve(R + B.T @ P @ B, B.T @ P @ A)
+        else:
+            P = scipy.linalg.solve_continuous_are(A, B, Q, R)
+            K = np.linalg.solve(R, B.T @ P)
+    except (np.linalg.LinAlgError, ValueError) as error:
+        raise ValueError(_why_no_solution(A, B, Q, discrete) + f" (scipy: {error})") from None
+    poles = np.linalg.eigvals(A - B @ K)
+    # scipy may return a finite but non-stabilising solution (e.g. an unweighted integrator)
+    stable = np.abs(poles).max() < 1 if discrete else poles.real.max() < 0
+    if not (np.isfinite(K).all() and stable):
+        raise ValueError(_why_no_solution(A, B, Q, discrete)
+                         + f" (closed-loop poles {np.round(poles, 6).tolist()})")
+    return LQRSolution(K, (P + P.T) / 2, poles)
+
+
+def _why_no_solution(A: FloatArray, B: FloatArray, Q: FloatArray, discrete: bool) -> str:
+    """Popov-Belevitch-Hautus tests on the modes that need stabilising, as a message."""
+    n = A.shape[0]
+    scale = max(1.0, np.abs(A).max(), np.abs(B).max(), np.abs(Q).max())
+    tol = 1e-8 * scale
+    for lam in np.linalg.eigvals(A):
+        unstable = abs(lam) >= 1 - 1e-9 if discrete else lam.real >= -1e-9 * scale
+        if not unstable:
+            continue
+        shifted = A - lam * np.eye(n)
+        # an unreachable mode: w' [A - lam I, B] = 0
+        u_, s, _ = np.linalg.svd(np.hstack([shifted, B]))
+        if s[-1] < tol:
+            where = "on or outside the unit circle" if discrete else "unstable or marginal"
+            return (f"(A, B) is not stabilisable: the mode at {_fmt(lam)} (in states "
+                    f"{_mode_states(u_[:, -1])}) is {where} and the inputs cannot move it")
+        marginal = abs(abs(lam) - 1) < 1e-9 if discrete else abs(lam.real) <= 1e-9 * scale
+        if marginal:
+            # a marginal mode Q does not see: [A - lam I; Q] v = 0
+            _, s, vh = np.linalg.svd(np.vstack([shifted, Q]))
+            if s[-1] < tol:
+                states = _mode_states(vh[-1].conj())
+                return (f"no stabilising LQR solution: the marginal mode at {_fmt(lam)} (in "
+                        f"states {states}) is not weighted by Q; weigh it or leave the state out")
+    return "no stabilising LQR solution (ill-conditioned or not stabilisable model)"
+
+
+def _mode_states(vector: NDArray[np.complex128]) -> list[int]:
+    magnitude = np.abs(vector)
+    return np.flatnonzero(magnitude > 0.3 * magnitude.max()).tolist()
+
+
+def _fmt(lam: complex) -> str:
+    return f"{lam.real:.4g}" if abs(lam.imag) < 1e-12 else f"{lam:.4g}"
+
+
+# -- the policy ----------------------------------------------------------------------------------
 class LQRPolicy:
-    """``u = -K (x - x_ref)`` on the observed channels, in the environment's action units.
+    """``u = u_ref - K (x - x_ref) - K_i z`` on the observed channels, as normalised actions.
 
     Unobserved states are taken at their reference value (e.g. the USV's unmeasured sway speed):
-    pass an estimator's full state instead (``observed=None``) to close that gap.
+    give the policy a full state (true, or an estimator's) to close that gap.
 
-    :param K: gain on the full state (n_u x n_x).
-    :param observed: indices of the states the observation holds, in order; None = full state.
-    :param x_ref, u_ref: reference state and input (physical units).
+    :param K: gain on the full state, ``(n_u, n_x)``, input units per state unit.
+    :param observed: indices of the states the observation holds, in order; None = the full state.
+    :param x_ref: reference state, ``(n_x,)``, state units.
+    :param u_ref: input at the reference, ``(n_u,)``, input units.
     :param u_low, u_high: physical limits mapped to actions -1 and +1 (of the inputs, or of the
-        actuators when ``allocation`` is given).
-    :param allocation: ``(n_actuators, n_inputs)`` map from inputs to actuator commands (e.g. the
+        actuators when ``allocation`` is given), their units.
+    :param allocation: ``(n_actuators, n_u)`` map from inputs to actuator commands (e.g. the
         pseudo-inverse of a thruster allocation matrix), or None when actions are the inputs.
+    :param integral: indices of the integrated states (each must be observed), or None.
+    :param K_i: gain on the integral states, ``(n_u, n_z)``, input units per (state unit * s).
+    :param dt: period between :meth:`predict` calls, s (the integration step; needed with
+        ``integral``).
+    :param anti_windup: conditional integration: a row's integral state is not advanced while
+        that would push an already saturated action further out.
+    :param observation_size: width of the observation (default: ``len(observed)``); columns after
+        the observed states are ignored (e.g. parameters an estimator appends).
     """
 
     def __init__(self, K: ArrayLike, observed: ArrayLike | None, x_ref: ArrayLike,
                  u_ref: ArrayLike, u_low: ArrayLike, u_high: ArrayLike,
-                 allocation: ArrayLike | None = None) -> None:
-        self.K = np.atleast_2d(np.asarray(K, dtype=float))
-        idx = np.arange(self.K.shape[1]) if observed is None else np.asarray(observed)
+                 allocation: ArrayLike | None = None, *, integral: ArrayLike | None = None,
+                 K_i: ArrayLike | None = None, dt: float | None = None,
+                 anti_windup: bool = True, observation_size: int | None = None) -> None:
+        self.K = _matrix("K", K)
+        n_u, n_x = self.K.shape
+        idx = np.arange(n_x) if observed is None else np.asarray(observed, dtype=int).reshape(-1)
+        if idx.size == 0 or len(set(idx.tolist())) != idx.size or idx.min() < 0 or \
+                idx.max() >= n_x:
+            raise ValueError(f"observed={np.asarray(observed).tolist()} is invalid: distinct "
+                             f"state indices in [0, {n_x})")
+        self.observed = idx
+        self.x_ref_full = _vector("x_ref", x_ref, n_x)
+        self.u_ref = _vector("u_ref", u_ref, n_u)
+        self.allocation = None if allocation is None else _matrix("allocation", allocation)
+        n_a = n_u if self.allocation is None else self.allocation.shape[0]
+        if self.allocation is not None and self.allocation.shape[1] != n_u:
+            raise ValueError(f"allocation has shape {self.allocation.shape}; expected "
+                             f"(n_actuators, {n_u})")
+        low, high = _vector("u_low", u_low, n_a), _vector("u_high", u_high, n_a)
+        if not np.all(low < high):
+            raise ValueError(f"u_low={low.tolist()} and u_high={high.tolist()} are invalid: "
+                             "each low < high")
+        self.u_mid, self.u_half = (high + low) / 2, (high - low) / 2
+        self.observation_size = idx.size if observation_size is None else int(observation_size)
+        if self.observation_size < idx.size:
+            raise ValueError(f"observation_size={observation_size} is smaller than the "
+                             f"{idx.size} observed states")
+        self.x_ref = self.x_ref_full[idx]
+
+        # the whole affine map to normalised actions, precomputed: v = c - e G' - z H'
+        to_action = np.eye(n_u) if self.allocation is None else self.allocation
+        to_action = to_action / self.u_half[:, None]
+        self._c = (to_action @ self.u_ref - self.u_mid / self.u_half)
         self.K_observed = self.K[:, idx]
-        self.x_ref = np.asarray(x_ref, dtype=float)[idx]
-        self.u_ref = np.asarray(u_ref, dtype=float)
-        self.u_mid = (np.asarray(u_high) + np.asarray(u_low)) / 2
-        self.u_half = (np.asarray(u_high) - np.asarray(u_low)) / 2
-        self.allocation = None if allocation is None else np.asarray(allocation, dtype=float)
+        self._G = to_action @ self.K_observed
+
+        self.integral = np.zeros(0, dtype=int) if integral is None else \
+            np.asarray(integral, dtype=int).reshape(-1)
+        n_z = self.integral.size
+        self.K_i = np.zeros((n_u, 0)) if K_i is None else _matrix("K_i", K_i)
+        if self.K_i.shape != (n_u, n_z):
+            raise ValueError(f"K_i has shape {self.K_i.shape}; expected ({n_u}, {n_z}), one "
+                             "column per integrated state")
+        missing = sorted(set(self.integral.tolist()) - set(idx.tolist()))
+        if missing:
+            raise ValueError(f"integral action on state(s) {missing} needs them observed; "
+                             f"observed: {idx.tolist()}")
+        self.dt = None if n_z == 0 and dt is None else _period(dt)
+        self._integral_columns = np.array([idx.tolist().index(i) for i in self.integral],
+                                          dtype=int)
+        self._H = to_action @ self.K_i
+        self.anti_windup = bool(anti_windup)
+        #: integral states ``z``, ``(N, n_z)`` (state unit * s), allocated at the first predict
+        self.integral_state: FloatArray | None = None
 
     @classmethod
-    def for_env(cls, env: Any, observed: str | None = "sensors") -> LQRPolicy:
-        """The discrete LQR of a marine environment's model, task weights and control period.
+    def for_model(cls, model: Any, Q: ArrayLike | Mapping[str, float],
+                  R: ArrayLike | Mapping[str, float], *, dt: float | None = None,
+                  continuous: bool = False, x_ref: ArrayLike | None = None,
+                  u_ref: ArrayLike | None = None, u_low: ArrayLike | None = None,
+                  u_high: ArrayLike | None = None, allocation: ArrayLike | None = None,
+                  integral: Mapping[str, float] | None = None,
+                  observed: Sequence[str | int] | None = None,
+                  observation_size: int | None = None, anti_windup: bool = True) -> LQRPolicy:
+        """LQR of any model of the vehicle-model protocol, linearised at ``(x_ref, u_ref)``.
 
-        :param observed: ``"sensors"`` (the env's measured channels) or None (full state, for
-            ``info["state"]`` or an estimator's output).
+        States that are not weighted and appear nowhere in ``A`` (e.g. a position when only the
+        heading matters) are left out of the design: their undamped modes would make the Riccati
+        equation unsolvable, and their gain would be zero anyway.
+
+        :param model: has ``state_names``, ``input_names``, ``x0``, ``u0``, ``u_bounds`` and
+            ``linearize(x0, u0) -> (A, B, E)``.
+        :param Q: state weight, ``(n_x, n_x)``, its diagonal ``(n_x,)``, or ``{state: weight}``
+            (1/state unit^2).
+        :param R: input weight, ``(n_u, n_u)``, ``(n_u,)`` or ``{input: weight}``.
+        :param dt: control period, s; None = continuous design (then no integral action).
+        :param continuous: with ``dt``, use the continuous gain at period ``dt`` (a sampled
+            continuous design) instead of the discrete LQR of the ZOH model.
+        :param x_ref, u_ref: reference state and input (default: the model's ``x0``, ``u0``).
+        :param u_low, u_high: limits mapped to actions -1, +1 (default: ``model.u_bounds``;
+            required with ``allocation``).
+        :param allocation: ``(n_actuators, n_u)`` input-to-actuator map, or None.
+        :param integral: ``{state name: weight of its integral state}`` for integral action.
+        :param observed: names (or indices) of the states the observation holds; None = all.
+        :param observation_size: see :class:`LQRPolicy`.
+        :param anti_windup: see :class:`LQRPolicy`.
+        """
+        names, inputs = tuple(model.state_names), tuple(model.input_names)
+        n, m = len(names), len(inputs)
+        x_ref = np.asarray(model.x0, float) if x_ref is None else _vector("x_ref", x_ref, n)
+        u_ref = np.asarray(model.u0, float) if u_ref is None else _vector("u_ref", u_ref, m)
+        Q = _weights("Q", Q, names)
+        R = _weights("R", R, inputs)
+        if dt is not None:
+            dt = _period(dt)
+        integrated, weights = _integral_spec(integral, names)
+        if integrated.size and dt is None:
+            raise ValueError("integral action needs dt, the period between predict calls (s)")
+        A, B, _ = model.linearize(x_ref, u_ref)
+        A, B = np.asarray(A, float), np.asarray(B, float)
+        keep = np.flatnonzero(np.any(Q != 0, axis=0) | np.any(A != 0, axis=0))
+        keep = np.union1d(keep, integrated)
+        sub = np.ix_(keep, keep)
+        design_dt = None if continuous else dt
+        position = np.searchsorted(keep, integrated)  # integrated states in the reduced design
+        if integrated.size:
+            gain = lqr_integral(A[sub], B[keep], Q[sub], R, position, weights, dt=design_dt).K
+        else:
+            gain = lqr(A[sub], B[keep], Q[sub], R, dt=design_dt).K
+        K = np.zeros((m, n))
+        K[:, keep] = gain[:, :keep.size]
+        if allocation is not None and (u_low is None or u_high is None):
+            raise ValueError("with an allocation, give u_low and u_high (the actuator limits)")
+        low, high = model.u_bounds if u_low is None or u_high is None else (u_low, u_high)
+        return cls(K, _indices("observed", observed, names), x_ref, u_ref, low, high,
+                   allocation, integral=integrated if integrated.size else None,
+                   K_i=gain[:, keep.size:] if integrated.size else None, dt=dt,
+                   anti_windup=anti_windup, observation_size=observation_size)
+
+    @classmethod
+    def for_env(cls, env: Any, observed: Observed = "auto", *,
+                integral: Mapping[str, float] | None = None, continuous: bool = False,
+                anti_windup: bool = True) -> LQRPolicy:
+        """The LQR of a marine environment's model, task weights and control period.
+
+        :param env: a marine environment (single or native vector), possibly wrapped.
+        :param observed: what :meth:`predict` will be given:
+
+            * ``"sensors"``: the environment's observation (its measured channels, which must
+              be states);
+            * ``"state"`` or None: the full model state (e.g. ``info["state"]``);
+            * ``"auto"``: if the environment or a wrapper around it has an ``estimator``
+              (whose ``state_names`` start with the model's), its observation is the estimate
+              and the first ``n_x`` entries are used; else ``"sensors"``.
+        :param integral: ``{state name: weight}`` for integral action (see :meth:`for_model`).
+        :param continuous: apply the continuous LQR gain at the environment's period instead of
+            the discrete LQR of the ZOH model (to compare with continuous designs).
+        :param anti_windup: see :class:`LQRPolicy`.
+        :raises ValueError: unknown ``observed``; sensors that are not states (use an
+            estimator); an estimator whose states are not the model's.
         """
         sim = env.unwrapped.sim
-        A, B, _ = sim.model.linearize(sim.task.x_ref, sim.task.u_ref)
-        # states that are not weighed and drive nothing (e.g. a position when only the heading
-        # matters) are left out: kept, their undamped modes would make the Riccati equation
-        # unsolvable, and the gain on them would be zero anyway
-        keep = np.flatnonzero((sim.task.q > 0) | np.any(A != 0, axis=0))
-        K = np.zeros((B.shape[1], A.shape[0]))
-        K[:, keep] = lqr_gain(A[np.ix_(keep, keep)], B[keep], np.diag(sim.task.q[keep]),
-                              np.diag(sim.task.r), dt=sim.dt)
-        idx = None
+        model = sim.model
+        names = tuple(model.state_names)
+        space = getattr(env, "single_observation_space", None)
+        space = env.observation_space if space is None else space
+        width = int(np.prod(space.shape)) if space.shape else None
+        if observed not in ("auto", "sensors", "state", None):
+            raise ValueError(f"observed={observed!r} is invalid: 'auto', 'sensors', 'state' or "
+                             "None")
+        idx: list[int] | None = None
+        size: int | None = None
+        if observed == "auto":
+            estimator = _find_estimator(env)
+            if estimator is not None:
+                estimated = tuple(estimator.state_names)
+                if estimated[:len(names)] != names:
+                    raise ValueError(f"the estimator's states {list(estimated)} do not start "
+                                     f"with the model's {list(names)}: LQR cannot read the "
+                                     "estimate")
+                observed, size = "state", width
+            else:
+                observed = "sensors"
         if observed == "sensors":
-            missing = sorted(set(sim.sensors.channels) - set(sim.model.state_names))
+            channels = tuple(sim.sensors.channels)
+            missing = [c for c in channels if c not in names]
             if missing:
-                raise ValueError(f"LQR on the sensors needs measured states; {missing} are "
-                                 "not states: use an estimator and observed=None")
-            idx = [sim.model.state_names.index(c) for c in sim.sensors.channels]
+                raise ValueError(f"LQR on the sensors needs measured states; {missing} are not "
+                                 "states: wrap the environment in an estimator "
+                                 "(EstimatorWrapper, observed='auto') or feed the full state "
+                                 "(observed='state')")
+            idx = [names.index(c) for c in channels]
         act = sim.actuation
         allocation = None if act.matrix is None else np.linalg.pinv(act.matrix)
-        return cls(K, idx, sim.task.x_ref, sim.task.u_ref, act.low, act.high, allocation)
+        return cls.for_model(model, np.diag(sim.task.q), np.diag(sim.task.r), dt=sim.dt,
+                             continuous=continuous, x_ref=sim.task.x_ref, u_ref=sim.task.u_ref,
+                             u_low=act.low, u_high=act.high, allocation=allocation,
+                             integral=integral, observed=idx, observation_size=size,
+                             anti_windup=anti_windup)
 
+    # -- SB3's interface -------------------------------------------------------------------------
     def predict(self, observation: ArrayLike, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[NDArray[np.float32], None]:
-        """Actions in [-1, 1] for one observation or a batch (SB3's signature)."""
+        """Actions in [-1, 1] for one observation ``(n_obs,)`` or a batch ``(N, n_obs)``.
+
+        :param observation: observed states (see ``observed``), their units.
+        :param state: ignored (SB3's recurrent state; the integral states live in the policy).
+        :param episode_start: ``(N,)`` booleans (or one for all rows): rows starting an episode,
+            whose integral states are reset before acting (SB3's semantics).
+        :param deterministic: ignored (LQR is deterministic).
+        :return: ``(actions, None)``, actions float32 of shape ``(n_actuators,)`` or
+            ``(N, n_actuators)``.
+        """
         obs = np.asarray(observation, dtype=float)
-        u = self.u_ref - (obs - self.x_ref) @ self.K_observed.T
-        if self.allocation is not None:
-            u = u @ self.allocation.T
-        action = np.clip((u - self.u_mid) / self.u_half, -1.0, 1.0)
-        return action.astype(np.float32), None
+        single = obs.ndim == 1
+        x = obs[None] if single else obs
+        if x.ndim != 2 or x.shape[1] != self.observation_size:
+            raise ValueError(f"observation has shape {obs.shape}; expected "
+                             f"({self.observation_size},) or (N, {self.observation_size})")
+        if not np.isfinite(x).all():
+            raise ValueError("observation contains NaN or inf")
+        error = x[:, :self.observed.size] - self.x_ref
+        v = self._c - error @ self._G.T
+        if self.integral.size:
+            z = self._integrator(x.shape[0], episode_start)
+            v -= z @ self._H.T
+            step = self.dt * error[:, self._integral_columns]
+            if self.anti_windup:
+                # integrating z_j moves action a by -H[a, j] * step_j: hold z_j in a row where
+                # that pushes an action that is already beyond its limit further out
+                beyond = np.sign(v) * (np.abs(v) > 1.0)
+                deeper = (beyond[:, :, None] * -self._H[None] * step[:, None, :] > 0).any(axis=1)
+                step[deeper] = 0.0
+            z += step
+        action = np.clip(v, -1.0, 1.0).astype(np.float32)
+        return (action[0] if single else action), None
+
+    def reset(self, idx: ArrayLike | None = None) -> None:
+        """Zero the integral states of rows ``idx``; None = all (the batch is then sized anew
+        at the next :meth:`predict`)."""
+        if idx is None or self.integral_state is None:
+            self.integral_state = None
+            return
+        self.integral_state[np.asarray(idx)] = 0.0
+
+    def _integrator(self, batch: int, episode_start: Any) -> FloatArray:
+        if self.integral_state is None:
+            self.integral_state = np.zeros((batch, self.integral.size))
+        elif self.integral_state.shape[0] != batch:
+            raise ValueError(f"predict got {batch} observation(s) but the integral states hold "
+                             f"{self.integral_state.shape[0]} row(s): call reset() first")
+        if episode_start is not None:
+            flags = np.asarray(episode_start, dtype=bool).reshape(-1)
+            if flags.size not in (1, batch):
+                raise ValueError(f"episode_start has {flags.size} entries; expected {batch} "
+                                 "(one per observation) or 1")
+            self.integral_state[np.broadcast_to(flags, (batch,))] = 0.0
+        return self.integral_state
+
+
+# -- helpers -------------------------------------------------------------------------------------
+def _vector(name: str, value: ArrayLike, n: int) -> FloatArray:
+    a = np.asarray(value, dtype=float).reshape(-1)
+    if a.shape != (n,):
+        raise ValueError(f"{name} has {a.size} entries; expected {n}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"{name}={a.tolist()} has non-finite entries")
+    return a
+
+
+def _weights(name: str, value: ArrayLike | Mapping[str, float],
+             names: tuple[str, ...]) -> FloatArray:
+    """A weight matrix from a matrix, its diagonal, or ``{name: weight}`` (diagonal)."""
+    n = len(names)
+    if isinstance(value, Mapping):
+        unknown = sorted(set(value) - set(names))
+        if unknown:
+            raise ValueError(f"{name}: unknown name(s) {unknown}; known: {', '.join(names)}")
+        value = [float(value.get(k, 0.0)) for k in names]
+    a = np.asarray(value, dtype=float)
+    if a.ndim == 1 and a.size == n:
+        a = np.diag(a)
+    if a.shape != (n, n):
+        raise ValueError(f"{name} has shape {a.shape}; expected ({n}, {n}) or ({n},) for "
+                         f"{', '.join(names)}")
+    return a
+
+
+def _indices(name: str, value: Sequence[str | int] | None,
+             names: tuple[str, ...]) -> list[int] | None:
+    if value is None:
+        return None
+    out = []
+    for v in value:
+        if isinstance(v, str):
+            if v not in names:
+                raise ValueError(f"{name}: unknown state {v!r}; known: {', '.join(names)}")
+            out.append(names.index(v))
+        else:
+            out.append(int(v))
+    return out
+
+
+def _integral_spec(integral: Mapping[str, float] | None,
+                   names: tuple[str, ...]) -> tuple[NDArray[np.intp], FloatArray]:
+    """Indices of the integrated states and their weights, in the model's state order."""
+    if integral is None or len(integral) == 0:
+        return np.zeros(0, dtype=np.intp), np.zeros(0)
+    if not isinstance(integral, Mapping):
+        raise TypeError(f"integral={integral!r} is invalid: a mapping {{state name: weight}}")
+    unknown = sorted(set(integral) - set(names))
+    if unknown:
+        raise ValueError(f"integral: unknown state(s) {unknown}; known: {', '.join(names)}")
+    chosen = [k for k in names if k in integral]
+    weights = np.array([float(integral[k]) for k in chosen])
+    if not np.all(np.isfinite(weights) & (weights > 0)):
+        raise ValueError(f"integral={dict(integral)!r} is invalid: weights must be finite and "
+                         "> 0")
+    return np.array([names.index(k) for k in chosen], dtype=np.intp), weights
+
+
+def _find_estimator(env: Any) -> Any:
+    """The ``estimator`` of the environment or of any wrapper in its chain, or None."""
+    seen = set()
+    while env is not None and id(env) not in seen:
+        seen.add(id(env))
+        estimator = getattr(env, "estimator", None)
+        if estimator is not None and hasattr(estimator, "state_names"):
+            return estimator
+        env = getattr(env, "env", None)
+    return None
