@@ -28,7 +28,7 @@ class OnTrueState:
 
     def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True):
-        return self.policy.predict(self.sim.x[0], deterministic=deterministic)
+        return self.policy.predict(self.sim.x[0], state, episode_start, deterministic)
 
 
 def episode_policy(name: str, env: Any, seed: int | None) -> Any:

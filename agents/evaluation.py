@@ -47,8 +47,9 @@ def run_episode(env: Any, policy: Any, steps: int, seed: int | None = None,
         from tqdm import tqdm
 
         iterator = tqdm(iterator, desc="simulating", unit="step")
-    for _ in iterator:
-        action, _ = policy.predict(obs, deterministic=True)
+    for k in iterator:
+        # SB3's convention: episode_start resets a stateful policy (e.g. LQR's integrators)
+        action, _ = policy.predict(obs, episode_start=np.array([k == 0]), deterministic=True)
         rows["time"].append(info["time"])
         rows["observations"].append(obs)
         rows["states"].append(info["state"])

@@ -118,6 +118,13 @@ def lqr_integral(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike,
     C = np.zeros((idx.size, n))
     C[np.arange(idx.size), idx] = 1.0
     n_z = idx.size
+    # the integrators' modes at 0 are reachable only if the inputs can hold every integrated
+    # state at any value in steady state: no transmission zero at s = 0
+    if np.linalg.matrix_rank(np.block([[A, B], [C, np.zeros((n_z, m))]])) < n + n_z:
+        raise ValueError(f"integral action on states {idx.tolist()} is not stabilisable: the "
+                         f"{m} input(s) cannot hold them at arbitrary values in steady state "
+                         "(rank [[A, B], [C, 0]] < n + n_z; more integrated states than inputs, "
+                         "or an integrated state the inputs do not move)")
     Q_aug = scipy.linalg.block_diag(Q, np.diag(w))
     B_aug = np.vstack([B, np.zeros((n_z, m))])
     if dt is None:
@@ -349,6 +356,12 @@ class LQRPolicy:
         integrated, weights = _integral_spec(integral, names)
         if integrated.size and dt is None:
             raise ValueError("integral action needs dt, the period between predict calls (s)")
+        observed_idx = _indices("observed", observed, names)
+        if observed_idx is not None:
+            missing = [names[i] for i in integrated if i not in observed_idx]
+            if missing:
+                raise ValueError(f"integral action on {missing} needs them observed; observed: "
+                                 f"{[names[i] for i in observed_idx]}")
         A, B, _ = model.linearize(x_ref, u_ref)
         A, B = np.asarray(A, float), np.asarray(B, float)
         keep = np.flatnonzero(np.any(Q != 0, axis=0) | np.any(A != 0, axis=0))
@@ -356,16 +369,23 @@ class LQRPolicy:
         sub = np.ix_(keep, keep)
         design_dt = None if continuous else dt
         position = np.searchsorted(keep, integrated)  # integrated states in the reduced design
-        if integrated.size:
-            gain = lqr_integral(A[sub], B[keep], Q[sub], R, position, weights, dt=design_dt).K
-        else:
-            gain = lqr(A[sub], B[keep], Q[sub], R, dt=design_dt).K
+        try:
+            if integrated.size:
+                gain = lqr_integral(A[sub], B[keep], Q[sub], R, position, weights,
+                                    dt=design_dt).K
+            else:
+                gain = lqr(A[sub], B[keep], Q[sub], R, dt=design_dt).K
+        except ValueError as error:
+            # the design's indices are of the reduced state, then the integrals: name them
+            design = [names[i] for i in keep] + [f"integral of {names[i]}" for i in integrated]
+            raise ValueError(f"LQR of {getattr(model, 'name', type(model).__name__)!r} "
+                             f"(design states {design}): {error}") from None
         K = np.zeros((m, n))
         K[:, keep] = gain[:, :keep.size]
         if allocation is not None and (u_low is None or u_high is None):
             raise ValueError("with an allocation, give u_low and u_high (the actuator limits)")
         low, high = model.u_bounds if u_low is None or u_high is None else (u_low, u_high)
-        return cls(K, _indices("observed", observed, names), x_ref, u_ref, low, high,
+        return cls(K, observed_idx, x_ref, u_ref, low, high,
                    allocation, integral=integrated if integrated.size else None,
                    K_i=gain[:, keep.size:] if integrated.size else None, dt=dt,
                    anti_windup=anti_windup, observation_size=observation_size)

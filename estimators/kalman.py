@@ -85,10 +85,11 @@ class KalmanFilter(Estimator):
                  reinitialise_diverged: bool = False) -> None:
         F = np.atleast_2d(np.asarray(F, dtype=float))
         n = F.shape[0]
-        G = np.asarray(G, dtype=float).reshape(n, -1) if np.size(G) else np.zeros((n, 0))
+        G = np.asarray(G, dtype=float)
+        G = G[:, None] if G.ndim == 1 else G
         H = np.atleast_2d(np.asarray(H, dtype=float))
         m = H.shape[0]
-        if F.shape != (n, n) or H.shape[1] != n or G.shape[0] != n:
+        if F.shape != (n, n) or H.shape[1] != n or G.ndim != 2 or G.shape[0] != n:
             raise ValueError(f"shapes do not match: F {F.shape}, G {np.shape(G)}, H {H.shape} "
                              f"(F must be n x n, G n x n_u, H m x n)")
         if not (math.isfinite(dt) and dt > 0):
