@@ -56,6 +56,26 @@ def check_positive(name: str, value: float) -> float:
     return float(value)
 
 
+def check_steps(name: str, value: float | ArrayLike) -> float | FloatArray:
+    """A quantization step: a positive scalar, or one positive step per observer ``(N,)``."""
+    if np.ndim(value) == 0:
+        return check_positive(name, value)  # type: ignore[arg-type]
+    steps = np.asarray(value, dtype=float)
+    if steps.ndim != 1 or steps.size == 0 or not np.all(np.isfinite(steps) & (steps > 0)):
+        raise ValueError(f"{name}={value!r} is invalid: a step > 0, or one per observer (N,)")
+    return steps
+
+
+def steps_per_row(name: str, steps: float | FloatArray, batch_size: int) -> float | FloatArray:
+    """``steps`` ready to broadcast over ``(N, channels)``: a scalar or an ``(N, 1)`` column."""
+    if np.ndim(steps) == 0:
+        return steps
+    if np.size(steps) != batch_size:
+        raise ValueError(f"{name} has {np.size(steps)} steps but the batch has {batch_size} "
+                         "observers")
+    return np.asarray(steps)[:, None]
+
+
 class HeldInputObserver(Estimator):
     """A batch of linear observers ``z' = F z + G_u u + G_h h``, integrated exactly.
 
@@ -72,10 +92,12 @@ class HeldInputObserver(Estimator):
     :param G_h: ``(n_z, n_h)`` matrix of the held data.
     :param C: ``(m, n)`` output matrix in the estimator's state and measurement order.
     :param dt: nominal step of :meth:`predict`, s.
+    :param batch_size: number of observers allocated at construction (see :meth:`bind`).
     """
 
     def __init__(self, F: ArrayLike, G_u: ArrayLike, G_h: ArrayLike, C: ArrayLike, dt: float,
-                 state_names: Sequence[str], measurement_names: Sequence[str]) -> None:
+                 state_names: Sequence[str], measurement_names: Sequence[str],
+                 batch_size: int = 1) -> None:
         self.F, self.G_u, self.G_h = (np.asarray(a, dtype=float) for a in (F, G_u, G_h))
         self.C = np.asarray(C, dtype=float)
         self.dt = check_positive("dt", dt)
@@ -84,7 +106,7 @@ class HeldInputObserver(Estimator):
             raise ValueError(f"C has shape {self.C.shape}; expected "
                              f"({len(self.measurement_names)}, {len(self.state_names)})")
         self._steps: dict[float, tuple[FloatArray, FloatArray, FloatArray]] = {}
-        self.bind(1)
+        self.bind(batch_size)
 
     # -- the Estimator contract -----------------------------------------------------------------
     def bind(self, batch_size: int) -> None:
@@ -163,8 +185,7 @@ class HeldInputObserver(Estimator):
 
     def _refresh(self) -> None:
         self.x = self._estimate(self.z)
-        self.diverged = ~np.isfinite(self.x).all(axis=1) | \
-            (np.abs(self.x) > DIVERGENCE_LIMIT).any(axis=1)
+        self.diverged = ~(np.abs(self.x).max(axis=1) <= DIVERGENCE_LIMIT)  # NaN counts too
 
 
 def observer_gain(A: ArrayLike, C: ArrayLike, poles: Sequence[float]) -> FloatArray:
@@ -190,14 +211,15 @@ class LuenbergerObserver(HeldInputObserver):
     :param B: ``(n, n_u)`` input matrix.
     :param C: ``(m, n)`` output matrix.
     :param L: ``(n, m)`` observer gain (see :func:`observer_gain`).
-    :param mu2: quantization step of every channel, in the channel's unit (rad, rad/s).
+    :param mu2: quantization step of every channel, in the channel's unit (rad, rad/s); a scalar,
+        or one step per observer ``(N,)`` (then the batch size is ``N``).
     :param dt: nominal step of :meth:`predict`, s.
     :param state_names: names of the states (default ``x0, x1, ...``).
     :param measurement_names: names of the measured channels (default ``y0, y1, ...``).
     """
 
     def __init__(self, A: ArrayLike, B: ArrayLike, C: ArrayLike, L: ArrayLike, *,
-                 mu2: float = 0.5, dt: float = 1e-3,
+                 mu2: float | ArrayLike = 0.5, dt: float = 1e-3,
                  state_names: Sequence[str] | None = None,
                  measurement_names: Sequence[str] | None = None) -> None:
         A, B, C, L = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (A, B, C, L))
@@ -206,15 +228,15 @@ class LuenbergerObserver(HeldInputObserver):
                                ("L", L, (n, m))):
             if a.shape != shape:
                 raise ValueError(f"{name} has shape {a.shape}; expected {shape}")
-        self.mu2 = check_positive("mu2", mu2)
+        self.mu2 = check_steps("mu2", mu2)
         self.A, self.B, self.L = A, B, L
         super().__init__(A - L @ C, B, L, C, dt,
                          state_names or [f"x{i}" for i in range(n)],
-                         measurement_names or [f"y{i}" for i in range(m)])
+                         measurement_names or [f"y{i}" for i in range(m)], np.size(mu2))
 
     @classmethod
     def for_usv(cls, model: USVModel | None = None, *,
-                poles: Sequence[float] = USV_OBSERVER_POLES, mu2: float = 0.5,
+                poles: Sequence[float] = USV_OBSERVER_POLES, mu2: float | ArrayLike = 0.5,
                 dt: float = 1e-3) -> LuenbergerObserver:
         """The USV baseline: model matrices of ``model`` (default seed 000), the seed's measured
         channels ``[r, psi, p, phi]``, gain placed at ``poles`` (1/s).
@@ -228,6 +250,10 @@ class LuenbergerObserver(HeldInputObserver):
         return cls(A, B, C, observer_gain(A, C, poles), mu2=mu2, dt=dt,
                    state_names=model.state_names, measurement_names=model.measured_names)
 
+    def bind(self, batch_size: int) -> None:
+        self._mu2 = steps_per_row("mu2", self.mu2, batch_size)
+        super().bind(batch_size)
+
     @property
     def q_y(self) -> NDArray[np.float64]:
         """The quantized outputs last received ``(N, m)``."""
@@ -237,7 +263,7 @@ class LuenbergerObserver(HeldInputObserver):
         self.z[rows], self.held[rows] = x0, x0 @ self.C.T  # no innovation before the first sample
 
     def _receive(self, y: FloatArray) -> FloatArray:
-        return quantize(y, self.mu2)
+        return quantize(y, self._mu2)
 
     def _estimate(self, z: FloatArray) -> FloatArray:
         return z

@@ -51,7 +51,7 @@ from marine_envs.models.usv import USVModel
 from marine_envs.sensors import ZoomingQuantizer, quantize
 
 from .base import FloatArray
-from .luenberger import HeldInputObserver, check_positive
+from .luenberger import HeldInputObserver, check_positive, check_steps, steps_per_row
 
 Objective = Literal["feasibility", "decoupled"]
 
@@ -458,7 +458,8 @@ def _diagnose(aug: AugmentedSystem, alpha: float, objective: str, protect: Seque
     if slowest >= -alpha:
         return "decay_rate", -slowest, (
             f"the decay rate alpha={alpha:g} is too large even without the matching condition: "
-            f"unobservable mode(s) {listed} decay at {-slowest:.4g} only, so alpha < {-slowest:.4g}")
+            f"unobservable mode(s) {listed} decay at {-slowest:.4g} only, so alpha < "
+            f"{-slowest:.4g}")
     if not _feasible(aug, alpha, False, margin, solver):
         return "numerical", None, (
             "the LMI without the matching condition should be feasible (the pair is detectable at "
@@ -502,14 +503,16 @@ class QuantizedPDObserver(HeldInputObserver):
 
     :param form: the plant in standard form (:func:`standard_form`).
     :param design: the solved LMI (:func:`design_pd_observer`) for ``form.A, form.D, form.C2``.
-    :param mu2: step of quantizer 2, in the units of ``y2`` (rad for the USV).
+    :param mu2: step of quantizer 2, in the units of ``y2`` (rad for the USV); a scalar, or one
+        step per observer ``(N,)`` (then the batch size is ``N``).
     :param k: zoom rate of quantizer 1, in (0, 1).
     :param rho: amplitude of ``us1``, in the disturbance's unit (rad/s^2); must bound ``||d||``.
     :param delta: smoothing constant of ``us1`` (> 0), in the units of ``P1 e1``.
     :param dt: nominal step of :meth:`predict`, s.
     """
 
-    def __init__(self, form: StandardForm, design: PDObserverDesign, *, mu2: float = 0.5,
+    def __init__(self, form: StandardForm, design: PDObserverDesign, *,
+                 mu2: float | ArrayLike = 0.5,
                  k: float = 0.6, rho: float = 0.6, delta: float = 0.01,
                  dt: float = 1e-3) -> None:
         if not (isinstance(k, int | float) and 0 < k < 1):
@@ -521,17 +524,18 @@ class QuantizedPDObserver(HeldInputObserver):
                 not np.allclose(aug.MA[:form.A.shape[0], :form.A.shape[0]], form.A):
             raise ValueError("design does not belong to form (design it for form.A, D, C2)")
         self.form, self.design = form, design
-        self.mu2, self.k = check_positive("mu2", mu2), float(k)
+        self.mu2, self.k = check_steps("mu2", mu2), float(k)
         self.rho, self.delta = float(rho), check_positive("delta", delta)
         self._n, self._T_inv = form.A.shape[0], np.linalg.inv(form.T)
         self._P1D1 = design.P1 @ form.D1  # row form of D1' P1 q(e1)
         MB = aug.M @ np.vstack([form.B, np.zeros((form.C2.shape[0], form.B.shape[1]))])
         super().__init__(design.As, MB, np.hstack([design.N, aug.MD]), form.C_c, dt,
-                         form.state_names, form.measurement_names)
+                         form.state_names, form.measurement_names, np.size(mu2))
 
     @classmethod
     def for_usv(cls, model: USVModel | None = None, *, alpha: float = 0.05,
-                objective: Objective = "feasibility", mu2: float = 0.5, k: float = 0.6,
+                objective: Objective = "feasibility", mu2: float | ArrayLike = 0.5,
+                k: float = 0.6,
                 rho: float = 0.6, delta: float = 0.01, dt: float = 1e-3,
                 solvers: Sequence[str] = DEFAULT_SOLVERS) -> QuantizedPDObserver:
         """Seed 000's observer for ``model`` (default: the seed's USV), designed here.
@@ -546,6 +550,7 @@ class QuantizedPDObserver(HeldInputObserver):
         return cls(form, design, mu2=mu2, k=k, rho=rho, delta=delta, dt=dt)
 
     def bind(self, batch_size: int) -> None:
+        self._mu2 = steps_per_row("mu2", self.mu2, batch_size)
         n1 = self.form.n1
         self.quantizer1 = ZoomingQuantizer([range(n1)], k=self.k, law="relative")
         self.quantizer1.bind(int(batch_size))
@@ -586,7 +591,7 @@ class QuantizedPDObserver(HeldInputObserver):
         e1 = self.z[:, :n1] - y_std[:, :n1]
         self.q_e1 = self.quantizer1(e1)
         self.mu1 = self.quantizer1.mu[:, 0].copy()
-        q_y2 = quantize(y_std[:, n1:], self.mu2)
+        q_y2 = quantize(y_std[:, n1:], self._mu2)
         push = self.q_e1 @ self._P1D1
         us1 = -self.rho * push / (np.linalg.norm(push, axis=1, keepdims=True) + self.delta)
         return np.hstack([q_y2, us1])
