@@ -55,8 +55,9 @@ def _episode(args: argparse.Namespace) -> int:
 
     env_kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
     summary = run(args.env, policy=args.policy, seconds=args.seconds, seed=args.seed,
-                  env_kwargs=env_kwargs, plot=args.plot)
-    print(f"{args.env}, policy {args.policy}, seed {args.seed}")
+                  env_kwargs=env_kwargs, plot=args.plot, estimator=args.estimator)
+    on = f" on {args.estimator}" if args.estimator else ""
+    print(f"{args.env}, policy {args.policy}{on}, seed {args.seed}")
     for key, value in summary.items():
         print(f"  {key:<24}{value:>14.6g}")
     if args.plot:
@@ -139,7 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
     sim.set_defaults(run=_simulate)
 
-    from .episode import EPISODE_POLICIES
+    from .episode import EPISODE_ESTIMATORS, EPISODE_POLICIES
 
     episode = commands.add_parser(
         "episode", help="run one episode of any environment; print RMS errors, plot it",
@@ -150,6 +151,10 @@ def build_parser() -> argparse.ArgumentParser:
     episode.add_argument("--policy", choices=EPISODE_POLICIES, default="lqr-state",
                          help="lqr-state (LQR on the true state, the default), lqr (on the raw "
                               "sensors), or an excitation: zero, sine, random, prbs")
+    episode.add_argument("--estimator", choices=EPISODE_ESTIMATORS,
+                         help="put an estimator between the sensors and the policy: kf (a "
+                              "Kalman filter of the env's linearised model; --policy lqr then "
+                              "acts on the full estimated state)")
     episode.add_argument("--seconds", type=float, help="episode length, s (the env's own)")
     episode.add_argument("--seed", type=int, default=0, help="episode seed (0)")
     episode.add_argument("--plot", metavar="PNG", help="write a figure of the episode")

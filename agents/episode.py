@@ -17,6 +17,8 @@ from .lqr import LQRPolicy
 from .simulate import POLICIES, make_policy
 
 EPISODE_POLICIES = (*POLICIES, "lqr-state")
+#: Estimators ``marine episode --estimator`` can put between the sensors and the policy.
+EPISODE_ESTIMATORS = ("kf",)
 
 
 class OnTrueState:
@@ -39,28 +41,39 @@ def episode_policy(name: str, env: Any, seed: int | None) -> Any:
 
 
 def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, seed: int = 0,
-        env_kwargs: Mapping[str, Any] | None = None,
-        plot: str | Path | None = None) -> dict[str, float]:
+        env_kwargs: Mapping[str, Any] | None = None, plot: str | Path | None = None,
+        estimator: str | None = None) -> dict[str, float]:
     """One episode of ``env_id`` under ``policy``; optionally a figure of it.
 
     :param seconds: episode length, s (default: the environment's own episode).
+    :param estimator: ``"kf"``: a Kalman filter of the env's model (its noise from the env's
+        sensors and disturbances) turns the sensor output into the policy's observation.
     :return: summary: return, steps, terminated, RMS error of each weighted state (SI; angles
-        also in degrees).
+        also in degrees), and with an estimator the RMS estimation error of those states.
     """
+    if estimator is not None and estimator not in EPISODE_ESTIMATORS:
+        raise ValueError(f"estimator={estimator!r} is invalid: one of {EPISODE_ESTIMATORS}")
     if seconds is not None and not (math.isfinite(seconds) and seconds > 0):
         raise ValueError(f"seconds={seconds!r} is invalid: a positive episode length in s")
     env = gym.make(env_id, **dict(env_kwargs or {}))
     sim = env.unwrapped.sim
     steps = env.spec.max_episode_steps if seconds is None else max(1, round(seconds / sim.dt))
     env = gym.wrappers.TimeLimit(env.unwrapped, steps)  # the requested length, not the spec's
+    if estimator is not None:
+        from estimators import EstimatorWrapper, KalmanFilter
+
+        env = EstimatorWrapper(env, KalmanFilter.for_env(env))
     episode = run_episode(env, episode_policy(policy, env, seed), steps, seed=seed)
     if plot is not None:
-        plot_episode(episode, sim, f"{env_id}, policy {policy}, seed {seed}", Path(plot))
-    return summarise(episode, sim)
+        title = f"{env_id}, policy {policy}" + (f" on {estimator}" if estimator else "")
+        plot_episode(episode, sim, f"{title}, seed {seed}", Path(plot),
+                     estimated=estimator is not None)
+    return summarise(episode, sim, estimated=estimator is not None)
 
 
-def summarise(episode: Episode, sim: Any) -> dict[str, float]:
-    """Return, length and the RMS error of each state the task weighs."""
+def summarise(episode: Episode, sim: Any, estimated: bool = False) -> dict[str, float]:
+    """Return, length and the RMS error of each state the task weighs (and of its estimate,
+    when the observations are estimates of the state)."""
     summary: dict[str, float] = {"return": episode.episode_return,
                                  "seconds": len(episode.time) * sim.dt,
                                  "terminated": float(episode.terminated)}
@@ -69,10 +82,13 @@ def summarise(episode: Episode, sim: Any) -> dict[str, float]:
     for i in np.flatnonzero(sim.task.q > 0):
         rms = float(np.sqrt(np.mean(error[:, i] ** 2)))
         name, unit = model.state_names[i], model.state_units[i]
-        if unit.startswith("rad"):
-            summary[f"rms_{name}_deg"] = math.degrees(rms)
-        else:
-            summary[f"rms_{name}"] = rms
+        degrees = unit.startswith("rad")
+        summary[f"rms_{name}_deg" if degrees else f"rms_{name}"] = \
+            math.degrees(rms) if degrees else rms
+        if estimated:
+            miss = float(np.sqrt(np.mean((episode.observations[:, i] - episode.states[:, i])**2)))
+            summary[f"estimation_rms_{name}_deg" if degrees else f"estimation_rms_{name}"] = \
+                math.degrees(miss) if degrees else miss
     return summary
 
 
@@ -88,8 +104,10 @@ def _measuring_channel(sim: Any, state: int) -> int | None:
     return int(moved[0]) if moved.size else None
 
 
-def plot_episode(episode: Episode, sim: Any, title: str, path: Path) -> None:
-    """True and measured values of the weighted states, and the inputs, against time."""
+def plot_episode(episode: Episode, sim: Any, title: str, path: Path,
+                 estimated: bool = False) -> None:
+    """True and measured (or, with ``estimated``, estimated) values of the weighted states,
+    and the inputs, against time."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -102,11 +120,11 @@ def plot_episode(episode: Episode, sim: Any, title: str, path: Path) -> None:
     for ax, i in zip(axes, shown, strict=False):
         name, unit = model.state_names[i], model.state_units[i]
         scale = 180 / math.pi if unit.startswith("rad") else 1.0
-        channel = _measuring_channel(sim, i)
+        channel = i if estimated else _measuring_channel(sim, i)
         if channel is not None:
-            measured = episode.observations[:, channel]
-            ax.plot(episode.time, measured * scale, color="tab:orange", lw=0.6, alpha=0.7,
-                    label="measured")
+            seen = episode.observations[:, channel]
+            ax.plot(episode.time, seen * scale, color="tab:orange", lw=0.6, alpha=0.7,
+                    label="estimated" if estimated else "measured")
         ax.plot(episode.time, episode.states[:, i] * scale, color="tab:blue", label="true")
         ax.axhline(sim.task.x_ref[i] * scale, color="0.5", lw=0.8, ls="--", label="reference")
         ax.set_ylabel(f"{name}\n({unit.replace('rad', 'deg')})")

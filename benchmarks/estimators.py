@@ -43,11 +43,15 @@ import json  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
+from typing import TYPE_CHECKING  # noqa: E402
 
 import numpy as np  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
 from estimators.kalman import AdaptiveKalmanFilter, KalmanFilter  # noqa: E402
+
+if TYPE_CHECKING:
+    from filterpy.kalman import KalmanFilter as FilterpyKF
 
 N_X, N_Y, N_U = 5, 4, 1
 BATCH = 1024
@@ -139,7 +143,7 @@ def make_filter(system: System, batch: int, *, adaptive: bool = False,
     return KalmanFilter(system.F, system.G, system.H, system.Q, system.R, **kwargs)
 
 
-def make_filterpy(system: System):  # -> filterpy.kalman.KalmanFilter
+def make_filterpy(system: System) -> FilterpyKF:
     """filterpy's filter of ``system``, started like ours (x = 0, P = P0)."""
     from filterpy.kalman import KalmanFilter as FilterpyKF
 
@@ -157,7 +161,7 @@ class Case:
     label: str
     batch: int
     run: Callable[[], float]
-    path: Callable[[], str] = lambda: "loop"
+    path: Callable[[], str]
 
 
 def our_case(label: str, kf: KalmanFilter, u: Array, y: Array,
@@ -171,9 +175,11 @@ def our_case(label: str, kf: KalmanFilter, u: Array, y: Array,
         return time.perf_counter() - start
 
     def path() -> str:
+        if kf.batch_size == 1:
+            return "loop"
         return "shared P" if kf.shared_covariance else "per-filter P"
 
-    return Case(label, kf.batch_size, run, path if kf.batch_size > 1 else Case.path)
+    return Case(label, kf.batch_size, run, path)
 
 
 def filterpy_case(system: System, u: Array, y: Array) -> Case:
@@ -187,7 +193,7 @@ def filterpy_case(system: System, u: Array, y: Array) -> Case:
             f.update(y[k, 0])
         return time.perf_counter() - start
 
-    return Case(FILTERPY_LABEL, 1, run)
+    return Case(FILTERPY_LABEL, 1, run, lambda: "loop")
 
 
 def build_cases(system: System, single_steps: int, batch_steps: int,

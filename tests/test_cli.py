@@ -96,9 +96,21 @@ def test_episode_prints_rms_errors_and_writes_a_plot(tmp_path, capsys):
     assert "seconds=-1" in capsys.readouterr().err
 
 
+def test_episode_with_a_kalman_filter_controls_the_dp_vessel_on_its_estimate(tmp_path, capsys):
+    """The DP vessel measures LF + WF motion, not states: LQR needs the KF's estimate."""
+    out = tmp_path / "s.json"
+    assert main(["episode", "marine_envs/DPVessel-v0", "--policy", "lqr", "--estimator", "kf",
+                 "--seconds", "100", "--json", str(out)]) == 0
+    summary = json.loads(out.read_text())
+    assert summary["terminated"] == 0.0
+    assert 0 < summary["estimation_rms_north_lf"] < 2.0
+    assert main(["episode", "marine_envs/DPVessel-v0", "--policy", "lqr"]) == 2
+    assert "wrap the environment in an estimator" in capsys.readouterr().err
+
+
 def test_help_explains_every_command(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     out = capsys.readouterr().out
-    for command in ("demo", "simulate", "episode", "envs"):
+    for command in ("demo", "simulate", "episode", "reproduce", "envs"):
         assert command in out
