@@ -209,15 +209,17 @@ class KalmanFilter(Estimator):
 
     def reset(self, x0: ArrayLike | None = None, P0: ArrayLike | None = None,
               idx: ArrayLike | None = None) -> None:
-        everyone = idx is None
-        rows = np.arange(self.batch_size) if everyone else np.atleast_1d(np.asarray(idx))
+        rows = np.arange(self.batch_size) if idx is None else np.atleast_1d(np.asarray(idx))
+        if rows.dtype == bool:
+            rows = np.flatnonzero(rows)
+        rows = np.unique(rows)
         x = self.x0 if x0 is None else np.asarray(x0, dtype=float)
         if x.shape not in ((self._n,), (rows.size, self._n)) or not np.isfinite(x).all():
             raise ValueError(f"x0 must be {self._n} finite values or ({rows.size}, {self._n}); "
                              f"got shape {x.shape}")
         P = self.P0 if P0 is None else check_covariance("P0", P0, self._n)
         self.x[rows] = x
-        if everyone or rows.size == self.batch_size:
+        if rows.size == self.batch_size:
             self._P = P.astype(self.dtype)[None].copy()
         elif rows.size:
             self._split()
@@ -263,13 +265,16 @@ class KalmanFilter(Estimator):
         HT = H.transpose(0, 2, 1)
         PHt = self._P @ HT
         S = H @ PHt + R
-        K = np.linalg.solve(S, PHt.transpose(0, 2, 1)).transpose(0, 2, 1)
-        if self.shared_covariance:
+        n = self._n
+        if self.shared_covariance:  # one solve: S^-1 [H P, e_1 ... e_N]
+            sol = np.linalg.solve(S[0], np.concatenate([PHt[0].T, e.T], axis=1))
+            K, S_inv_e = sol[:, :n].T[None], sol[:, n:].T
             self.x = self.x + e @ K[0].T
-            S_inv_e = np.linalg.solve(S[0], e.T).T
-        else:
+        else:  # one batched solve: S_i^-1 [H P_i, e_i]
+            rhs = np.concatenate([PHt.transpose(0, 2, 1), e[:, :, None]], axis=2)
+            sol = np.linalg.solve(S, rhs)
+            K, S_inv_e = sol[:, :, :n].transpose(0, 2, 1), sol[:, :, n]
             self.x = self.x + (K @ e[:, :, None])[:, :, 0]
-            S_inv_e = np.linalg.solve(S, e[:, :, None])[:, :, 0]
         IKH = self._I - K @ H
         P = IKH @ self._P @ IKH.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)
         self._P = (P + P.transpose(0, 2, 1)) * 0.5
@@ -289,8 +294,10 @@ class KalmanFilter(Estimator):
         """Hold the covariance once again when every filter's has converged to the same."""
         P = self._P
         if P.shape[0] > 1 and self._process_noise().shape[0] == 1:
-            spread = np.ptp(P, axis=0).max()
-            if spread <= 16 * np.finfo(self.dtype).eps * np.abs(P[0]).max():
+            # compared as correlations: badly scaled states must agree in their own units too
+            std = np.sqrt(np.abs(np.diagonal(P[0]))) + np.finfo(self.dtype).tiny
+            spread = np.ptp(P, axis=0) / np.outer(std, std)
+            if spread.max() <= 16 * np.finfo(self.dtype).eps:
                 self._P = P[:1].copy()
 
     def _process_noise(self) -> FloatArray:

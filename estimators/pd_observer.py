@@ -25,6 +25,8 @@ Findings the code documents (numbers in the reproduction ``usv-quantized-observe
 * For the USV the largest decay rate is ``alpha -> 1/Tv = 0.1`` (not attained): with the matching
   condition the ``x2`` block must satisfy a Lyapunov inequality on its own, and the sway mode
   ``v' = -v/Tv`` is unobservable inside it (it reaches ``y2`` only through ``x1 = [r, p]``).
+* The input ``us1`` slides ``x_hat1`` onto ``y1``: it absorbs the sway error's footprint in
+  ``r`` and ``p`` as if it were wave disturbance, which it cannot be told apart from.
 * ``objective="decoupled"`` adds linear constraints to the same LMI (``Y`` rows and ``P``
   couplings of the unmeasured states set to zero, so their rows of ``Ls`` vanish): the gain from
   ``eps`` to their error is then exactly zero. For the USV that is the physically right answer:
@@ -60,7 +62,7 @@ DEFAULT_SOLVERS: tuple[str, ...] = ("CLARABEL", "SCS")
 
 
 # -- 1. standard form --------------------------------------------------------------------------
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)  # arrays: compare fields explicitly
 class StandardForm:
     """A plant ``x_c' = A_c x_c + B_c u + D_c d``, ``y_c = C_c x_c`` and its standard form.
 
@@ -107,6 +109,9 @@ def standard_form(A_c: ArrayLike, B_c: ArrayLike, D_c: ArrayLike, C_c: ArrayLike
     """
     A_c, B_c, D_c, C_c = (np.atleast_2d(np.asarray(a, dtype=float)) for a in (A_c, B_c, D_c, C_c))
     n, n1 = A_c.shape[0], D_c.shape[1]
+    if A_c.shape != (n, n) or B_c.shape[0] != n or D_c.shape[0] != n or C_c.shape[1] != n:
+        raise ValueError(f"shapes A_c {A_c.shape}, B_c {B_c.shape}, D_c {D_c.shape}, C_c "
+                         f"{C_c.shape} do not fit together (B_c and D_c need n rows)")
     names = tuple(state_names or [f"x{i}" for i in range(n)])
     channels = tuple(measurement_names or [f"y{i}" for i in range(C_c.shape[0])])
     hit = [int(i) for i in np.flatnonzero(np.abs(D_c).sum(axis=1))]
@@ -144,7 +149,7 @@ def usv_standard_form(model: USVModel | None = None) -> StandardForm:
 
 
 # -- 2. augmented descriptor system ------------------------------------------------------------
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class AugmentedSystem:
     """MODELS.md 1.5's augmented system ``E_bar x_bar' = A_bar x_bar + ...`` and ``M``.
 
@@ -211,7 +216,7 @@ class LMIInfeasibleError(ValueError):
         self.condition, self.alpha_max, self.solver_status = condition, alpha_max, solver_status
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True, eq=False)
 class PDObserverDesign:
     """A solved PD-observer LMI, re-verified with eigenvalues after the solve.
 
