@@ -1,16 +1,22 @@
 """State estimators of the source documents, batched, with Gymnasium wrappers.
 
-* :class:`KalmanFilter`, :class:`AdaptiveKalmanFilter` (seed 001) in :mod:`estimators.kalman`;
-* the quantized-signal PD observer of seed 000 in :mod:`estimators.pd_observer` (needs cvxpy:
-  ``pip install "marine-envs[estimators]"``);
-* :class:`EstimatorWrapper`, :class:`VectorEstimatorWrapper` in :mod:`estimators.wrappers`.
+* :class:`KalmanFilter`, :class:`AdaptiveKalmanFilter` (seed 001): :mod:`estimators.kalman`;
+* seed 000's quantized-signal PD observer, :class:`QuantizedPDObserver`, and its LMI design
+  :func:`design_pd_observer` (needs cvxpy: ``pip install "marine-envs[estimators]"``):
+  :mod:`estimators.pd_observer`; the classical :class:`LuenbergerObserver`:
+  :mod:`estimators.luenberger`;
+* :class:`EstimatorWrapper`, :class:`VectorEstimatorWrapper` and :func:`wrap`:
+  :mod:`estimators.wrappers`.
 
 Every estimator follows :class:`estimators.base.Estimator` (ARCHITECTURE.md contract 3).
 """
 
 from .base import Estimator
 from .kalman import AdaptiveKalmanFilter, KalmanFilter
+from .luenberger import LuenbergerObserver
+from .pd_observer import LMIInfeasibleError, QuantizedPDObserver, design_pd_observer
 from .wrappers import EstimatorWrapper, VectorEstimatorWrapper, wrap
 
 __all__ = ["AdaptiveKalmanFilter", "Estimator", "EstimatorWrapper", "KalmanFilter",
-           "VectorEstimatorWrapper", "wrap"]
+           "LMIInfeasibleError", "LuenbergerObserver", "QuantizedPDObserver",
+           "VectorEstimatorWrapper", "design_pd_observer", "wrap"]
