@@ -366,7 +366,11 @@ def _check_decouplable(aug: AugmentedSystem, protect: Sequence[int]) -> None:
 def _solve(aug: AugmentedSystem, alpha: float, matched: bool, objective: str,
            protect: Sequence[int], margin: float, solver: str) -> _Solution:
     """Build and solve one LMI with one solver; capture its warnings and verify the result."""
-    import cvxpy as cp  # an optional, heavy dependency: imported only when designing
+    try:  # an optional, heavy dependency: imported only when designing
+        import cvxpy as cp
+    except ImportError as error:
+        raise ImportError("the PD observer's LMI design needs cvxpy: "
+                          'pip install "marine-envs[estimators]"') from error
 
     nb, n1, m2 = aug.MA.shape[0], aug.n1, aug.R.shape[1]
     if matched:
