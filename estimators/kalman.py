@@ -12,6 +12,7 @@ symmetrised after each step, so it stays symmetric positive definite, also in fl
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -22,6 +23,7 @@ import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
 from marine_envs.models import VehicleModel
+from marine_envs.sensors import GaussianNoise, Quantizer, WrapAngle
 
 from .base import Estimator, as_batch, check_covariance
 
@@ -402,8 +404,6 @@ def _output_matrix(model: VehicleModel, measured: Sequence[str],
 
 
 def _wrapped_channels(sim: Any) -> list[bool]:
-    from marine_envs.sensors import WrapAngle
-
     wrapped = np.zeros(len(sim.sensors.channels), dtype=bool)
     for stage in sim.sensors.stages:
         if isinstance(stage, WrapAngle):
@@ -413,8 +413,6 @@ def _wrapped_channels(sim: Any) -> list[bool]:
 
 def default_measurement_noise(sim: Any) -> NDArray[np.float64]:
     """Each channel's noise variance plus its quantization step squared over 12 (diagonal)."""
-    from marine_envs.sensors import GaussianNoise, Quantizer
-
     var = np.zeros(len(sim.sensors.channels))
     for stage in sim.sensors.stages:
         if isinstance(stage, GaussianNoise):
@@ -428,8 +426,6 @@ def default_measurement_noise(sim: Any) -> NDArray[np.float64]:
 def default_process_noise(sim: Any, steps: int = 2000, seed: int = 0) -> NDArray[np.float64]:
     """The covariance of the environment's disturbances over one ``steps``-long run of a fixed
     seed, held over each control period and mapped through the model's ``E`` at the reference."""
-    import copy
-
     model = sim.model
     n_d = len(model.disturbance_names)
     A, _, E = model.linearize(sim.task.x_ref, sim.task.u_ref)
