@@ -24,6 +24,8 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
+from marine_envs import models
+
 FloatArray = NDArray[np.float64]
 Observed = Literal["auto", "sensors", "state"] | None
 
@@ -48,13 +50,10 @@ def zoh(A: ArrayLike, B: ArrayLike, dt: float) -> tuple[FloatArray, FloatArray]:
     (s): exact for inputs held over each period."""
     A, B = _matrix("A", A), _matrix("B", B)
     dt = _period(dt)
-    n, m = B.shape
+    n = B.shape[0]
     if A.shape != (n, n):
         raise ValueError(f"shapes do not match: A {A.shape}, B {B.shape}")
-    block = np.zeros((n + m, n + m))
-    block[:n, :n], block[:n, n:] = A, B
-    phi = scipy.linalg.expm(block * dt)
-    return phi[:n, :n], phi[:n, n:]
+    return models.zoh(A, B, dt)
 
 
 def lqr(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike,

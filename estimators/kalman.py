@@ -22,7 +22,7 @@ import scipy.linalg
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
-from marine_envs.models import VehicleModel
+from marine_envs.models import VehicleModel, zoh
 from marine_envs.sensors import GaussianNoise, Quantizer, WrapAngle
 
 from .base import Estimator, as_batch, check_covariance
@@ -30,23 +30,13 @@ from .base import Estimator, as_batch, check_covariance
 FloatArray = NDArray[np.floating]
 
 
-def discretize(A: ArrayLike, B: ArrayLike, dt: float) -> tuple[NDArray, NDArray]:
-    """Zero-order-hold discretisation: ``(Phi, Gamma)`` with ``Phi = exp(A dt)`` and
-    ``Gamma = int_0^dt exp(A s) ds B`` (exact for inputs held over the period ``dt``, s)."""
-    A, B = np.atleast_2d(A), np.atleast_2d(B)
-    n, m = B.shape
-    block = np.zeros((n + m, n + m))
-    block[:n, :n], block[:n, n:] = A, B
-    phi = scipy.linalg.expm(block * dt)
-    return phi[:n, :n], phi[:n, n:]
-
-
 def held_noise_covariance(A: ArrayLike, E: ArrayLike, dt: float,
                           disturbance_cov: ArrayLike) -> NDArray[np.float64]:
     """Process-noise covariance ``Q = Gamma_E Sigma Gamma_E'`` of disturbances ``d`` held over
-    each period (``Gamma_E``: the ZOH input matrix of ``E``), with ``Sigma`` their covariance."""
+    each period (``Gamma_E``: the :func:`~marine_envs.models.zoh` input matrix of ``E``), with
+    ``Sigma`` their covariance."""
     E = np.atleast_2d(np.asarray(E, dtype=float))
-    _, gamma = discretize(A, E, dt)
+    _, gamma = zoh(A, E, dt)
     sigma = check_covariance("disturbance_cov", disturbance_cov, E.shape[1])
     q = gamma @ sigma @ gamma.T
     return (q + q.T) / 2
@@ -144,7 +134,7 @@ class KalmanFilter(Estimator):
         x_ref = model.x0 if x_ref is None else np.asarray(x_ref, dtype=float)
         u_ref = model.u0 if u_ref is None else np.asarray(u_ref, dtype=float)
         A, B, _ = model.linearize(x_ref, u_ref)
-        Phi, Gamma = discretize(A, np.column_stack([B, model.rhs(x_ref, u_ref)]), dt)
+        Phi, Gamma = zoh(A, np.column_stack([B, model.rhs(x_ref, u_ref)]), dt)
         G, drift = Gamma[:, :-1], Gamma[:, -1]
         c = x_ref - Phi @ x_ref - G @ u_ref + drift
         H, d = _output_matrix(model, measured, x_ref)

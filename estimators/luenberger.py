@@ -17,13 +17,14 @@ passed directly.
 from __future__ import annotations
 
 import math
+from abc import abstractmethod
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.linalg
 import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
+from marine_envs.models import zoh
 from marine_envs.models.usv import USVModel
 from marine_envs.sensors import quantize
 
@@ -37,18 +38,6 @@ USV_OBSERVER_POLES: tuple[float, ...] = (-0.15, -0.2, -0.25, -0.3, -0.35)
 
 #: An estimate larger than this (in any state's SI unit) counts as diverged.
 DIVERGENCE_LIMIT = 1e6
-
-
-def exact_discretisation(F: FloatArray, G: FloatArray, dt: float) -> tuple[FloatArray, FloatArray]:
-    """``(Phi, Gamma)`` with ``z(t+dt) = Phi z(t) + Gamma w`` for ``z' = F z + G w``, ``w`` held.
-
-    :param F: state matrix ``(n, n)``, 1/s.
-    :param G: forcing matrix ``(n, m)``.
-    :param dt: step, s.
-    """
-    n, m = G.shape
-    block = scipy.linalg.expm(np.block([[F, G], [np.zeros((m, n + m))]]) * dt)
-    return block[:n, :n], block[:n, n:]
 
 
 def check_positive(name: str, value: float) -> float:
@@ -158,15 +147,17 @@ class HeldInputObserver(Estimator):
         return self.x, self.P
 
     # -- for subclasses -------------------------------------------------------------------------
+    @abstractmethod
     def _restart(self, rows: NDArray[np.intp], x0: FloatArray) -> None:
         """Set ``z[rows]`` and ``held[rows]`` for a restart from ``x0`` ``(len(rows), n)``."""
-        raise NotImplementedError
 
+    @abstractmethod
     def _receive(self, y: FloatArray) -> FloatArray:
-        raise NotImplementedError
+        """The data held until the next sample, from the valid measurement ``y``."""
 
+    @abstractmethod
     def _estimate(self, z: FloatArray) -> FloatArray:
-        raise NotImplementedError
+        """The estimate ``x`` (model order and units) of the observer state ``z``."""
 
     # -- helpers --------------------------------------------------------------------------------
     def _valid(self, y: ArrayLike, mask: ArrayLike | None) -> FloatArray:
@@ -181,7 +172,7 @@ class HeldInputObserver(Estimator):
 
     def _step_matrices(self, dt: float) -> tuple[FloatArray, FloatArray, FloatArray]:
         if dt not in self._steps:
-            Phi, Gam = exact_discretisation(self.F, np.hstack([self.G_u, self.G_h]), dt)
+            Phi, Gam = zoh(self.F, np.hstack([self.G_u, self.G_h]), dt)
             n_u = self.G_u.shape[1]
             self._steps[dt] = (Phi, Gam[:, :n_u], Gam[:, n_u:])
         return self._steps[dt]

@@ -5,8 +5,8 @@ import pytest
 import scipy.stats
 
 from estimators import AdaptiveKalmanFilter, KalmanFilter
-from estimators.kalman import discretize, held_noise_covariance
-from marine_envs.models import get_model
+from estimators.kalman import held_noise_covariance
+from marine_envs.models import get_model, zoh
 
 N_X, N_Y = 4, 2
 
@@ -15,7 +15,7 @@ def system(seed: int = 0):
     """A stable, observable 4-state / 2-measurement discrete system with known noise."""
     rng = np.random.default_rng(seed)
     A = np.array([[0, 1, 0, 0], [-1.0, -0.4, 0.3, 0], [0, 0, 0, 1], [0.2, 0, -2.0, -0.6]])
-    F, G = discretize(A, rng.normal(size=(4, 1)), 0.1)
+    F, G = zoh(A, rng.normal(size=(4, 1)), 0.1)
     H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
     Q = held_noise_covariance(A, np.eye(4), 0.1, np.diag([0.1, 0.2, 0.1, 0.3]))
     R = np.diag([0.05, 0.02])
@@ -188,7 +188,7 @@ def test_missing_channel_gets_no_gain_and_nan_is_missing():
 def test_covariance_stays_symmetric_positive_definite_in_float32():
     """Badly scaled states (1e3 and 1e-3) and a nearly unobservable mode, 20 000 steps."""
     A = np.array([[0, 1, 0], [0, -1e-3, 0], [0, 0, -1e-4]])
-    F, G = discretize(A, np.array([[0.0], [1.0], [0.0]]), 0.1)
+    F, G = zoh(A, np.array([[0.0], [1.0], [0.0]]), 0.1)
     H = np.array([[1.0, 0, 1e-4]])
     Q = np.diag([1e2, 1e-6, 1e-10])
     kf = KalmanFilter(F, G, H, Q, [[1e-4]], dt=0.1, dtype=np.float32, batch_size=2,
@@ -260,7 +260,7 @@ def test_from_model_keeps_absolute_units_at_a_trim_point():
         kf.predict(craft.u0)
     np.testing.assert_allclose(kf.x[0], craft.x0, atol=1e-9)
     A, B, _ = craft.linearize()
-    Phi, _ = discretize(A, B, 0.05)
+    Phi, _ = zoh(A, B, 0.05)
     np.testing.assert_allclose(kf.F, Phi)
 
 

@@ -197,9 +197,9 @@ def test_observers_track_the_plant_with_fine_quantization_in_calm_water(form, ki
 
 
 def _exact_step(A, B, dt):
-    from estimators.luenberger import exact_discretisation
+    from marine_envs.models import zoh
 
-    Phi, Gam = exact_discretisation(A, B, dt)
+    Phi, Gam = zoh(A, B, dt)
     return lambda x, u: Phi @ x + Gam @ u
 
 

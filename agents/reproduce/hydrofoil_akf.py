@@ -18,6 +18,7 @@ Two settings are run on the same seas and sensor noise (common random numbers):
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -72,18 +73,18 @@ def _document_noise(env: gym.Env, W: np.ndarray) -> np.ndarray:
     return held_noise_covariance(A, np.eye(4), sim.dt, W)
 
 
-def _sea_noise(hs: float) -> Callable[[gym.Env], np.ndarray]:
+@functools.cache
+def _sea_noise(hs: float) -> np.ndarray:
     """Process noise of the env's waves at a constant significant height ``hs``, m."""
-    def q(env: gym.Env) -> np.ndarray:
-        return default_process_noise(gym.make(ENV_ID, hs=hs).unwrapped.sim)
-    return q
+    return default_process_noise(gym.make(ENV_ID, hs=hs).unwrapped.sim)
 
 
 def settings() -> list[Setting]:
     """The document's setting and the corrected one."""
     doc_min = lambda e: _document_noise(e, WQ_MIN)  # noqa: E731 - tiny factories
     doc_max = lambda e: _document_noise(e, WQ_MAX)  # noqa: E731
-    calm, rough = _sea_noise(CALM_HS), _sea_noise(ROUGH_HS)
+    calm = lambda e: _sea_noise(CALM_HS)  # noqa: E731
+    rough = lambda e: _sea_noise(ROUGH_HS)  # noqa: E731
     r_real = np.diag(np.array(list(REAL_SENSORS.values())) ** 2)
     return [
         Setting("document", "seed 001 as given: sensor noise variance 0.003 on every channel, "

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 from tqdm.auto import tqdm
 
-from estimators.luenberger import LuenbergerObserver, exact_discretisation
+from estimators.luenberger import LuenbergerObserver
 from estimators.pd_observer import (
     LMIInfeasibleError,
     PDObserverDesign,
@@ -42,6 +42,7 @@ from estimators.pd_observer import (
     largest_decay_rate,
     usv_standard_form,
 )
+from marine_envs.models import zoh
 from marine_envs.models.usv import USVModel
 
 from .base import Reproduction, spread
@@ -128,7 +129,7 @@ def simulate(scenario: Scenario, seeds: Sequence[int], designs: Mapping[str, PDO
     observers["luenberger"] = LuenbergerObserver.for_usv(mu2=steps, dt=dt)
     model = USVModel()
     A, B, E = model.linearize()
-    Phi, Gam = exact_discretisation(A, np.hstack([B, E]), dt)
+    Phi, Gam = zoh(A, np.hstack([B, E]), dt)
     C, forcing = model.C, _forcing(scenario, seeds, steps.size // len(seeds), total)
 
     x = np.zeros((steps.size, 5))

@@ -13,10 +13,9 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any, Literal, TypedDict
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
-from ..models import VehicleModel
+from ..models import VehicleModel, zoh
 from ..sea.processes import DisturbanceSource
 from ..sensors import SensorSuite, as_index, per_channel
 
@@ -116,15 +115,12 @@ class ExactLinear:
 
     def __init__(self, model: VehicleModel, dt: float) -> None:
         A, B, E = model.linearize()
-        n, m = A.shape[0], B.shape[1] + E.shape[1]
         nominal = np.concatenate([model.x0, model.u0, np.zeros(E.shape[1])])
         # the affine part: x_dot = A x + [B E] [u d] + c
         constant = model.rhs(model.x0, model.u0) - A @ model.x0 - B @ model.u0
-        block = np.zeros((n + m + 1, n + m + 1))
-        block[:n, :n], block[:n, n:-1], block[:n, -1] = A, np.hstack([B, E]), constant
-        phi = scipy.linalg.expm(block * dt)[:n]
-        self.transition = phi[:, :-1].T.copy()
-        offset = phi[:, -1]
+        Phi, Gamma = zoh(A, np.column_stack([B, E, constant]), dt)
+        self.transition = np.hstack([Phi, Gamma[:, :-1]]).T.copy()
+        offset = Gamma[:, -1]
         self.offset = offset if np.abs(offset).max() > 1e-12 * (1 + np.abs(nominal).max()) \
             else None
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import importlib
 
-from .base import VehicleModel
+from .base import VehicleModel, zoh
 from .usv import USVModel, USVParams
 
 #: Model name -> "module:class"; modules are imported on first use.
@@ -40,4 +40,4 @@ def get_model(name: str, **params: float) -> VehicleModel:
     return model.with_params(**params) if params else model
 
 
-__all__ = ["VehicleModel", "USVModel", "USVParams", "get_model", "model_names"]
+__all__ = ["VehicleModel", "USVModel", "USVParams", "get_model", "model_names", "zoh"]

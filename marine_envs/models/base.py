@@ -13,6 +13,7 @@ from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
@@ -125,6 +126,17 @@ class VehicleModel(ABC):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.params!r})"
+
+
+def zoh(A: ArrayLike, B: ArrayLike, dt: float) -> tuple[FloatArray, FloatArray]:
+    """Zero-order-hold discretisation ``(Phi, Gamma)`` of ``x_dot = A x + B w`` over ``dt`` s:
+    ``Phi = exp(A dt)``, ``Gamma = int_0^dt exp(A s) ds B``, exact for ``w`` held over the step."""
+    A, B = np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_2d(np.asarray(B, dtype=float))
+    n, m = B.shape
+    block = np.zeros((n + m, n + m))
+    block[:n, :n], block[:n, n:] = A, B
+    phi = scipy.linalg.expm(block * dt)
+    return phi[:n, :n], phi[:n, n:]
 
 
 class LinearizedModel(VehicleModel):
