@@ -15,6 +15,9 @@ from .base import Reproduction
 REPRODUCTIONS: dict[str, str] = {
     "usv-quantized-observer": "agents.reproduce.usv_quantized_observer",
     "hydrofoil-akf": "agents.reproduce.hydrofoil_akf",
+    "rov-online-id": "agents.reproduce.rov_online_id",
+    "dp-wave-frequency": "agents.reproduce.dp_wave_frequency",
+    "hovercraft-zigzag": "agents.reproduce.hovercraft_zigzag",
 }
 
 

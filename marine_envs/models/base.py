@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
@@ -42,6 +43,9 @@ class VehicleModel(ABC):
     disturbance_units: ClassVar[tuple[str, ...]]
     #: True when ``rhs`` is affine in (x, u, d): the environment then steps it exactly (ZOH).
     is_linear: ClassVar[bool] = False
+    #: Parameters in which ``rhs`` is affine (a coefficient times a term of the forces, with the
+    #: mass matrix not involved): :meth:`rhs_with` varies them per row for one ``rhs`` call each.
+    affine_parameters: ClassVar[frozenset[str]] = frozenset()
 
     def __init__(self, params: Any) -> None:
         self.params = params
@@ -101,6 +105,66 @@ class VehicleModel(ABC):
             _jacobian(lambda z, i=i: self.rhs(*_replace_arg((x0, u0, d0), i, z)), arg, eps)
             for i, arg in enumerate((x0, u0, d0))
         )
+
+    def rhs_with(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,
+                 params: Mapping[str, ArrayLike]) -> FloatArray:
+        """:meth:`rhs` with the named parameters replaced, row by row (what an estimator of the
+        parameters needs: one filter per row, each with its own values).
+
+        :param params: ``{name: value}``; each value a scalar or an array of the batch shape of
+            ``x``, in the parameter's units. Names as in :attr:`params`.
+        :return: ``x_dot``, shape ``(..., n_x)``.
+
+        Exact for every parameter. Parameters in :attr:`affine_parameters` cost one ``rhs`` call
+        each; any other makes one model per distinct value (slow: meant for small batches).
+        """
+        if not params:
+            return self.rhs(x, u, d)
+        x, u, d = self._split(x, u, d)
+        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], d.shape[:-1],
+                                    *(np.shape(v) for v in params.values()))
+        flat = [np.broadcast_to(a, (*shape, a.shape[-1])).reshape(-1, a.shape[-1])
+                for a in (x, u, d)]
+        values = {k: np.broadcast_to(np.asarray(v, dtype=float), shape).ravel()
+                  for k, v in self._known(params).items()}
+        other = [k for k in values if k not in self.affine_parameters]
+        if not other:
+            return self._rhs_affine(*flat, values).reshape(*shape, -1)
+        out = np.empty((flat[0].shape[0], len(self.state_names)))
+        keys = np.column_stack([values[k] for k in other])
+        distinct, group = np.unique(keys, axis=0, return_inverse=True)
+        for i, row in enumerate(distinct):
+            rows = group.ravel() == i
+            model = self.with_params(**dict(zip(other, row.tolist(), strict=True)))
+            rest = {k: v[rows] for k, v in values.items() if k not in other}
+            out[rows] = model._rhs_affine(*(a[rows] for a in flat), rest)
+        return out.reshape(*shape, -1)
+
+    def _known(self, params: Mapping[str, ArrayLike]) -> Mapping[str, ArrayLike]:
+        names = {f.name for f in dataclasses.fields(self.params)}
+        unknown = sorted(set(params) - names)
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {unknown} for model {self.name!r}; "
+                             f"known: {', '.join(sorted(names))}")
+        return params
+
+    def _rhs_affine(self, x: FloatArray, u: FloatArray, d: FloatArray,
+                    values: Mapping[str, FloatArray]) -> FloatArray:
+        """``rhs`` plus the exact change of each affine parameter from its nominal value."""
+        nominal_rhs = self.rhs(x, u, d)
+        out = nominal_rhs.copy()
+        for name, value in values.items():
+            nominal = float(getattr(self.params, name))
+            step = max(1.0, abs(nominal))  # affine: any step is exact; this one is well scaled
+            change = self._unit_step(name, step).rhs(x, u, d) - nominal_rhs
+            out += change * ((value - nominal) / step)[:, None]
+        return out
+
+    def _unit_step(self, name: str, step: float) -> VehicleModel:
+        cache = self.__dict__.setdefault("_step_models", {})
+        if name not in cache:
+            cache[name] = self.with_params(**{name: float(getattr(self.params, name)) + step})
+        return cache[name]
 
     # -- variants ------------------------------------------------------------------------------
     def with_params(self, **changes: float) -> VehicleModel:

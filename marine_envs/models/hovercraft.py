@@ -178,6 +178,10 @@ class HovercraftModel(VehicleModel):
     state_units: ClassVar[tuple[str, ...]] = ("m/s", "m/s", "rad/s", "m", "m", "rad")
     input_units: ClassVar[tuple[str, ...]] = ("-", "-", "rad")
     disturbance_units: ClassVar[tuple[str, ...]] = ("m/s", "m/s")
+    #: The force-polynomial and rudder coefficients: each multiplies one term of the forces.
+    affine_parameters: ClassVar[frozenset[str]] = frozenset(
+        f.name for f in dataclasses.fields(HovercraftParams)
+        if f.name[:3] in ("X_A", "Y_A", "N_A", "X_H", "Y_H", "N_H") or f.name.startswith("C_R"))
 
     def __init__(self, params: HovercraftParams | None = None) -> None:
         super().__init__(HovercraftParams() if params is None else params)
