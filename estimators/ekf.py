@@ -181,8 +181,10 @@ class ExtendedKalmanFilter(Estimator):
         bad = [n for n, v in zip(parameters, nominal, strict=True)
                if not isinstance(v, int | float) or isinstance(v, bool)]
         if bad:
-            raise ValueError(f"parameter(s) {bad} are not scalar parameters of model "
-                             f"{model.name!r}")
+            scalars = [f.name for f in dataclasses.fields(model.params)
+                       if isinstance(getattr(model.params, f.name), int | float)]
+            raise ValueError(f"parameter(s) {bad} are unknown or not scalar in model "
+                             f"{model.name!r}; its scalar parameters: {', '.join(scalars)}")
         ekf: ExtendedKalmanFilter
 
         def f(x: FloatArray, u: FloatArray, theta: FloatArray) -> FloatArray:

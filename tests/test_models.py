@@ -125,3 +125,23 @@ def test_linearized_model_is_the_affine_model_of_the_nonlinear_one():
     err_half = linear.rhs(x + dx / 2, u) - hovercraft.rhs(x + dx / 2, u)
     assert np.abs(err).max() > 0 and np.abs(err_half).max() < 0.3 * np.abs(err).max()
     assert linear.with_params(N_Hr=-1e6).A[2, 2] != linear.A[2, 2]
+
+
+@pytest.mark.parametrize("names", [("N_Hr", "Y_Hv", "C_R4"), ("T0", "N_Hr"), ("m",)])
+def test_rhs_with_replaces_parameters_row_by_row(names):
+    """Affine parameters take the fast path, others one model per value; both are exact."""
+    model = get_model("hovercraft")
+    rng = np.random.default_rng(0)
+    x = model.x0 + rng.normal(0, [1, 0.5, 0.02, 0, 0, 0.1], (5, 6))
+    u = model.u0 + rng.normal(0, [0.1, 0.1, 0.2], (5, 3))
+    values = {n: getattr(model.params, n) * rng.uniform(0.5, 1.5, 5) for n in names}
+    got = model.rhs_with(x, u, None, values)
+    for i in range(5):
+        alone = model.with_params(**{n: v[i] for n, v in values.items()}).rhs(x[i], u[i])
+        np.testing.assert_allclose(got[i], alone, rtol=1e-10, atol=1e-12)
+
+
+def test_rhs_with_refuses_unknown_parameters():
+    model = get_model("hovercraft")
+    with pytest.raises(ValueError, match="unknown parameter.*N_Xyz"):
+        model.rhs_with(model.x0, model.u0, None, {"N_Xyz": 1.0})
