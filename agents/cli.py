@@ -153,8 +153,9 @@ def build_parser() -> argparse.ArgumentParser:
                               "sensors), or an excitation: zero, sine, random, prbs")
     episode.add_argument("--estimator", choices=EPISODE_ESTIMATORS,
                          help="put an estimator between the sensors and the policy: kf (a "
-                              "Kalman filter of the env's linearised model; --policy lqr then "
-                              "acts on the full estimated state)")
+                              "Kalman filter of the env's linearised model) or ekf (an extended "
+                              "Kalman filter of its nonlinear model); --policy lqr then acts on "
+                              "the full estimated state")
     episode.add_argument("--seconds", type=float, help="episode length, s (the env's own)")
     episode.add_argument("--seed", type=int, default=0, help="episode seed (0)")
     episode.add_argument("--plot", metavar="PNG", help="write a figure of the episode")
@@ -173,7 +174,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "  usv-quantized-observer  seed 000: PD observer vs Luenberger on quantized "
                     "USV data\n"
                     "  hydrofoil-akf           seed 001: LQR fed by a KF vs the adaptive KF, "
-                    "time-varying sea",
+                    "time-varying sea\n"
+                    "  rov-online-id           seed 002: joint EKF of velocity and 18 drag "
+                    "coefficients through the morph, thrust feed-forward\n"
+                    "  dp-wave-frequency       seed 003: FFT + Butterworth + EKF estimate of the "
+                    "wave frequencies, wave filter update\n"
+                    "  hovercraft-zigzag       seed 004: staged EKF identification from 5/5, "
+                    "15/15, 25/25 zig-zags vs least squares",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     reproduce.add_argument("name", choices=REPRODUCTIONS, help="the experiment")
     reproduce.add_argument("--quick", action="store_true",

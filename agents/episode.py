@@ -18,7 +18,7 @@ from .simulate import POLICIES, make_policy
 
 EPISODE_POLICIES = (*POLICIES, "lqr-state")
 #: Estimators ``marine episode --estimator`` can put between the sensors and the policy.
-EPISODE_ESTIMATORS = ("kf",)
+EPISODE_ESTIMATORS = ("kf", "ekf")
 
 
 class OnTrueState:
@@ -46,7 +46,8 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     """One episode of ``env_id`` under ``policy``; optionally a figure of it.
 
     :param seconds: episode length, s (default: the environment's own episode).
-    :param estimator: ``"kf"``: a Kalman filter of the env's model (its noise from the env's
+    :param estimator: ``"kf"``: a Kalman filter of the env's model linearised at the reference,
+        or ``"ekf"``: an extended Kalman filter of the nonlinear model (their noise from the env's
         sensors and disturbances) turns the sensor output into the policy's observation.
     :return: summary: return, steps, terminated, RMS error of each weighted state (SI; angles
         also in degrees), and with an estimator the RMS estimation error of those states.
@@ -60,9 +61,10 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     steps = env.spec.max_episode_steps if seconds is None else max(1, round(seconds / sim.dt))
     env = gym.wrappers.TimeLimit(env.unwrapped, steps)  # the requested length, not the spec's
     if estimator is not None:
-        from estimators import EstimatorWrapper, KalmanFilter
+        from estimators import EstimatorWrapper, ExtendedKalmanFilter, KalmanFilter
 
-        env = EstimatorWrapper(env, KalmanFilter.for_env(env))
+        kind = ExtendedKalmanFilter if estimator == "ekf" else KalmanFilter
+        env = EstimatorWrapper(env, kind.for_env(env))
     episode = run_episode(env, episode_policy(policy, env, seed), steps, seed=seed)
     if plot is not None:
         title = f"{env_id}, policy {policy}" + (f" on {estimator}" if estimator else "")
