@@ -288,7 +288,8 @@ class ExtendedKalmanFilter(Estimator):
         u = as_batch("u", u, self.batch_size, self.n_inputs)
         if not np.isfinite(u).all():
             raise ValueError("u has non-finite entries")
-        self.transition = _expm(self._state_jacobian(self.x, u) * dt)
+        n, size = self._n, self._n + self._p
+        T = _transition_rows(self._state_jacobian(self.x, u) * dt)  # Phi = [[T], [0, I]]
         h = dt / self.substeps
         for _ in range(self.substeps):  # RK4, input held
             k1 = self._z_dot(self.x, u)
@@ -296,11 +297,16 @@ class ExtendedKalmanFilter(Estimator):
             k3 = self._z_dot(self.x + 0.5 * h * k2, u)
             k4 = self._z_dot(self.x + h * k3, u)
             self.x = self.x + (h / 6) * (k1 + 2 * (k2 + k3) + k4)
-        Phi = self.transition
-        P = Phi @ self.P @ Phi.transpose(0, 2, 1)
-        n = self._n
+        # Phi P Phi' with the parameters' identity rows exploited (5x cheaper for 13 + 18)
+        TP = T @ self.P
+        P = self.P.copy()
+        P[:, :n, :n] = TP @ T.transpose(0, 2, 1)
+        P[:, :n, n:] = TP[:, :, n:]
+        P[:, n:, :n] = TP[:, :, n:].transpose(0, 2, 1)
         P[:, :n, :n] += self.Q * (dt / self.dt)
-        P[:, range(n, n + self._p), range(n, n + self._p)] += self.parameter_noise**2 * dt
+        P[:, range(n, size), range(n, size)] += self.parameter_noise**2 * dt
+        self.transition = np.tile(np.eye(size), (self.batch_size, 1, 1))
+        self.transition[:, :n] = T
         self.P = (P + P.transpose(0, 2, 1)) * 0.5
         return self.x
 
@@ -393,20 +399,17 @@ class ExtendedKalmanFilter(Estimator):
         return out
 
     def _state_jacobian(self, z: FloatArray, u: FloatArray) -> FloatArray:
-        """``d z_dot / d z`` ``(N, n + p, n + p)`` (parameter rows are zero)."""
+        """``d f / d [x; theta]`` ``(N, n, n + p)`` (the parameters' own rows are zero)."""
         N, n, size = z.shape[0], self._n, self._n + self._p
-        A = np.zeros((N, size, size))
         if self.jacobian is not None:
-            A[:, :n, :n], A[:, :n, n:] = self.jacobian(z[:, :n], u, z[:, n:])
-            return A
+            return np.concatenate(self.jacobian(z[:, :n], u, z[:, n:]), axis=2)
         step = 1e-6 * np.maximum(1.0, np.abs(z))  # (N, size)
         offsets = np.einsum("ni,ij->nij", step, np.eye(size))
         points = np.concatenate([z[:, None] + offsets, z[:, None] - offsets], axis=1)
         points = points.reshape(N * 2 * size, size)
         values = self.f(points[:, :n], np.repeat(u, 2 * size, axis=0), points[:, n:])
         values = values.reshape(N, 2, size, n)
-        A[:, :n, :] = ((values[:, 0] - values[:, 1]) / (2 * step[:, :, None])).transpose(0, 2, 1)
-        return A
+        return ((values[:, 0] - values[:, 1]) / (2 * step[:, :, None])).transpose(0, 2, 1)
 
     def _measurement_jacobian(self, z: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``(H (N, m, n + p), h(z) (N, m))`` at the estimates."""
@@ -452,19 +455,29 @@ def rts_smooth(result: FilterResult) -> SmootherResult:
     return SmootherResult(x, P, result)
 
 
-def _expm(A: FloatArray) -> FloatArray:
-    """``exp(A)`` of a batch ``(N, n, n)``: an 8th-order Taylor series with scaling and squaring
-    (truncation below 1e-11 relative; 15x faster than scipy's batched Pade for a filter's small
-    steps)."""
-    norm = float(np.abs(A).sum(axis=2).max()) if A.size else 0.0
+def _transition_rows(A: FloatArray) -> FloatArray:
+    """The model rows ``[Phi_x, Gamma]`` ``(N, n, n + p)`` of ``exp([[A_x, A_theta], [0, 0]])``
+    for ``A = [A_x, A_theta]`` ``(N, n, n + p)`` (one step's ``df/dz dt``).
+
+    An 8th-order Taylor series with scaling and squaring: truncation below 1e-11 relative, and
+    much cheaper than scipy's batched Pade for a filter's small steps. Powers of the augmented
+    matrix keep zero parameter rows, ``[[X, Y], [0, 0]]^k = [[X^k, X^(k-1) Y], [0, 0]]``, so only
+    the model rows are computed; a squaring is ``[X, Y] -> [X X, X Y + Y]``.
+    """
+    n = A.shape[1]
+    norm = float(np.abs(A[:, :, :n]).sum(axis=2).max()) if A.size else 0.0
     squarings = max(0, math.ceil(math.log2(norm / 0.25))) if norm > 0.25 else 0
     A = A / 2**squarings
-    term, out = A, np.eye(A.shape[-1]) + A
+    X = A[:, :, :n]
+    term, out = A, A.copy()
+    out[:, :, :n] += np.eye(n)
     for k in range(2, 9):
-        term = term @ A / k
-        out = out + term
+        term = X @ term / k
+        out += term
     for _ in range(squarings):
-        out = out @ out
+        squared = out[:, :, :n] @ out
+        squared[:, :, n:] += out[:, :, n:]
+        out = squared
     return out
 
 
