@@ -100,6 +100,9 @@ class ExtendedKalmanFilter(Estimator):
         "saturating" on old data); 0 (default) = constant parameters.
     :param jacobian: analytic Jacobians (see :data:`Jacobian`); default: central differences of
         ``f`` over ``[x; theta]`` in one batched call.
+    :param parameter_jacobian: ``df/dtheta (N, n, p) = parameter_jacobian(x, u, theta)`` alone
+        (e.g. exact regressors of parameters that enter linearly); the differences then cover
+        ``x`` only.
     :param x0, P0: default initial augmented estimate ``(n + p,)`` and covariance.
     :param angular: measured channels (names or indices) that are wrapped angles: their
         innovation is wrapped to (-pi, pi].
@@ -112,7 +115,8 @@ class ExtendedKalmanFilter(Estimator):
                  dt: float, Q: ArrayLike, R: ArrayLike, n_inputs: int,
                  state_names: Sequence[str], measurement_names: Sequence[str],
                  parameter_names: Sequence[str] = (), parameter_noise: ArrayLike | None = None,
-                 jacobian: Jacobian | None = None, x0: ArrayLike | None = None,
+                 jacobian: Jacobian | None = None,
+                 parameter_jacobian: Dynamics | None = None, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, angular: Sequence[str | int] = (),
                  substeps: int = 1, batch_size: int = 1, divergence_ratio: float = 10.0,
                  reinitialise_diverged: bool = False) -> None:
@@ -123,7 +127,8 @@ class ExtendedKalmanFilter(Estimator):
             raise ValueError(f"substeps={substeps!r} is invalid: an integer >= 1")
         if not divergence_ratio > 1:
             raise ValueError(f"divergence_ratio={divergence_ratio!r} is invalid: must be > 1")
-        self.f, self.jacobian, self.dt, self.substeps = f, jacobian, float(dt), substeps
+        self.f, self.jacobian, self.parameter_jacobian = f, jacobian, parameter_jacobian
+        self.dt, self.substeps = float(dt), substeps
         self.n_inputs, self._n, self._p = int(n_inputs), n, p
         self.model_state_names = tuple(state_names)
         self.parameter_names = tuple(parameter_names)
@@ -165,7 +170,8 @@ class ExtendedKalmanFilter(Estimator):
         """The filter of a vehicle model (:mod:`marine_envs.models`), optionally with some of its
         parameters (names as in ``model.params``) appended to the state.
 
-        The dynamics are ``model.rhs_with(x, u, d, {name: theta})``; ``d`` is the filter's
+        The dynamics are ``model.rhs_with(x, u, d, {name: theta})``, their parameter Jacobian
+        ``model.parameter_jacobian`` where the model has an exact one; ``d`` is the filter's
         attribute ``disturbance`` ``(N, n_d)`` (zeros unless given; assign to it between
         predictions, e.g. the ROV's morph command). ``x0`` defaults to the model's nominal state
         and its parameters' values. Other arguments as the constructor.
@@ -193,6 +199,14 @@ class ExtendedKalmanFilter(Estimator):
                 return model.rhs(x, u, d)
             return model.rhs_with(x, u, d, dict(zip(parameters, theta.T, strict=True)))
 
+        def parameter_jacobian(x: FloatArray, u: FloatArray, theta: FloatArray) -> FloatArray:
+            d = np.repeat(ekf.disturbance, x.shape[0] // ekf.batch_size, axis=0)
+            return model.parameter_jacobian(x, u, d, dict(zip(parameters, theta.T, strict=True)))
+
+        exact = parameters and model.parameter_jacobian(
+            model.x0, model.u0, None, dict(zip(parameters, nominal, strict=True))) is not None
+        if exact:
+            kwargs.setdefault("parameter_jacobian", parameter_jacobian)
         rows = [model.output_names.index(c) for c in measured]
         if model.output_names == model.state_names:
             h: Any = np.eye(len(model.state_names))[rows]
@@ -400,13 +414,25 @@ class ExtendedKalmanFilter(Estimator):
 
     def _state_jacobian(self, z: FloatArray, u: FloatArray) -> FloatArray:
         """``d f / d [x; theta]`` ``(N, n, n + p)`` (the parameters' own rows are zero)."""
-        N, n, size = z.shape[0], self._n, self._n + self._p
+        n = self._n
+        x, theta = z[:, :n], z[:, n:]
         if self.jacobian is not None:
-            return np.concatenate(self.jacobian(z[:, :n], u, z[:, n:]), axis=2)
-        step = 1e-6 * np.maximum(1.0, np.abs(z))  # (N, size)
-        offsets = np.einsum("ni,ij->nij", step, np.eye(size))
+            return np.concatenate(self.jacobian(x, u, theta), axis=2)
+        if self.parameter_jacobian is None:
+            return self._differences(z, u, n)
+        return np.concatenate([self._differences(z, u, n, columns=n),
+                               self.parameter_jacobian(x, u, theta)], axis=2)
+
+    def _differences(self, z: FloatArray, u: FloatArray, n: int,
+                     columns: int | None = None) -> FloatArray:
+        """Central differences of ``f`` over the first ``columns`` entries of ``z`` (all by
+        default), evaluated in one batched call: ``(N, n, columns)``."""
+        N, size = z.shape[0], columns or z.shape[1]
+        step = 1e-6 * np.maximum(1.0, np.abs(z[:, :size]))  # (N, size)
+        offsets = np.zeros((N, size, z.shape[1]))
+        offsets[:, range(size), range(size)] = step
         points = np.concatenate([z[:, None] + offsets, z[:, None] - offsets], axis=1)
-        points = points.reshape(N * 2 * size, size)
+        points = points.reshape(N * 2 * size, z.shape[1])
         values = self.f(points[:, :n], np.repeat(u, 2 * size, axis=0), points[:, n:])
         values = values.reshape(N, 2, size, n)
         return ((values[:, 0] - values[:, 1]) / (2 * step[:, :, None])).transpose(0, 2, 1)

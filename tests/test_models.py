@@ -145,3 +145,18 @@ def test_rhs_with_refuses_unknown_parameters():
     model = get_model("hovercraft")
     with pytest.raises(ValueError, match="unknown parameter.*N_Xyz"):
         model.rhs_with(model.x0, model.u0, None, {"N_Xyz": 1.0})
+
+
+def test_parameter_jacobian_is_exact_for_affine_parameters_and_none_otherwise():
+    model = get_model("hovercraft")
+    x = model.x0 + np.array([0.5, 0.8, 0.03, 0, 0, 0.1])
+    u = model.u0 + np.array([0.05, -0.05, 0.2])
+    names = ("N_Hr", "N_Hrrr", "C_R4")
+    values = {n: 1.2 * getattr(model.params, n) for n in names}
+    J = model.parameter_jacobian(x, u, None, values)
+    for j, name in enumerate(names):
+        h = 1e-4 * abs(values[name])
+        plus = model.rhs_with(x, u, None, {**values, name: values[name] + h})
+        minus = model.rhs_with(x, u, None, {**values, name: values[name] - h})
+        np.testing.assert_allclose(J[:, j], (plus - minus) / (2 * h), rtol=1e-6, atol=1e-15)
+    assert model.parameter_jacobian(x, u, None, {"T0": 8e4}) is None

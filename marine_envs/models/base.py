@@ -140,6 +140,23 @@ class VehicleModel(ABC):
             out[rows] = model._rhs_affine(*(a[rows] for a in flat), rest)
         return out.reshape(*shape, -1)
 
+    def parameter_jacobian(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,
+                           params: Mapping[str, ArrayLike]) -> FloatArray | None:
+        """``d rhs_with / d params`` at the given values, shape ``(..., n_x, p)`` in the order of
+        ``params``, exact; or None when the model has no exact form (estimators then take
+        differences of :meth:`rhs_with`). Here: exact when every name is in
+        :attr:`affine_parameters` (one ``rhs`` call each)."""
+        self._known(params)
+        if not params or not set(params) <= self.affine_parameters:
+            return None
+        x, u, d = self._split(x, u, d)
+        nominal = self.rhs(x, u, d)
+        columns = []
+        for name in params:
+            step = max(1.0, abs(float(getattr(self.params, name))))
+            columns.append((self._unit_step(name, step).rhs(x, u, d) - nominal) / step)
+        return np.stack(columns, axis=-1)
+
     def _known(self, params: Mapping[str, ArrayLike]) -> Mapping[str, ArrayLike]:
         names = {f.name for f in dataclasses.fields(self.params)}
         unknown = sorted(set(params) - names)
