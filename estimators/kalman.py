@@ -429,5 +429,6 @@ def default_process_noise(sim: Any, steps: int = 2000, seed: int = 0) -> NDArray
         sigma = np.atleast_2d(np.cov(samples, rowvar=False))
     n = A.shape[0]
     Q = held_noise_covariance(A, E, sim.dt, sigma) if n_d else np.zeros((n, n))
-    # a floor keeps every state's prediction honest about the model's own errors
-    return Q + np.diag(np.full(n, 1e-9 * max(1.0, np.trace(Q))))
+    # a floor keeps every state's prediction honest about the model's own errors; per state, in
+    # its own unit (a trace would mix N^2 of a bias with rad^2 of a heading)
+    return Q + np.diag(1e-9 * np.maximum(1.0, np.diag(Q)))
