@@ -1,8 +1,9 @@
 """State estimators of the source documents, batched, with Gymnasium wrappers.
 
 * :class:`KalmanFilter`, :class:`AdaptiveKalmanFilter` (seed 001): :mod:`estimators.kalman`;
-* :class:`ExtendedKalmanFilter`, with model parameters appended to the state, and the RTS
-  smoother :func:`rts_smooth` (seeds 002-004): :mod:`estimators.ekf`;
+* :class:`ExtendedKalmanFilter`, with model parameters appended to the state, its unscented
+  variant :class:`UnscentedKalmanFilter` and the RTS smoother :func:`rts_smooth` (seeds
+  002-004): :mod:`estimators.ekf`;
 * seed 000's quantized-signal PD observer, :class:`QuantizedPDObserver`, and its LMI design
   :func:`design_pd_observer` (needs cvxpy: ``pip install "marine-envs[estimators]"``):
   :mod:`estimators.pd_observer`; the classical :class:`LuenbergerObserver`:
@@ -14,7 +15,7 @@ Every estimator follows :class:`estimators.base.Estimator` (ARCHITECTURE.md cont
 """
 
 from .base import Estimator
-from .ekf import ExtendedKalmanFilter, rts_smooth
+from .ekf import ExtendedKalmanFilter, UnscentedKalmanFilter, rts_smooth
 from .kalman import AdaptiveKalmanFilter, KalmanFilter
 from .luenberger import LuenbergerObserver
 from .pd_observer import LMIInfeasibleError, QuantizedPDObserver, design_pd_observer
@@ -22,4 +23,5 @@ from .wrappers import EstimatorWrapper, VectorEstimatorWrapper, wrap
 
 __all__ = ["AdaptiveKalmanFilter", "Estimator", "EstimatorWrapper", "ExtendedKalmanFilter",
            "KalmanFilter", "LMIInfeasibleError", "LuenbergerObserver", "QuantizedPDObserver",
-           "VectorEstimatorWrapper", "design_pd_observer", "rts_smooth", "wrap"]
+           "UnscentedKalmanFilter", "VectorEstimatorWrapper", "design_pd_observer", "rts_smooth",
+           "wrap"]

@@ -296,63 +296,35 @@ class ExtendedKalmanFilter(Estimator):
         self.diverged[rows] = False
 
     def predict(self, u: ArrayLike, dt: float | None = None) -> FloatArray:
-        dt = self.dt if dt is None else float(dt)
-        if not (math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt={dt!r} is invalid: must be > 0 s")
-        u = as_batch("u", u, self.batch_size, self.n_inputs)
-        if not np.isfinite(u).all():
-            raise ValueError("u has non-finite entries")
-        n, size = self._n, self._n + self._p
+        u, dt = self._input(u, dt)
+        n = self._n
         T = _transition_rows(self._state_jacobian(self.x, u) * dt)  # Phi = [[T], [0, I]]
-        h = dt / self.substeps
-        for _ in range(self.substeps):  # RK4, input held
-            k1 = self._z_dot(self.x, u)
-            k2 = self._z_dot(self.x + 0.5 * h * k1, u)
-            k3 = self._z_dot(self.x + 0.5 * h * k2, u)
-            k4 = self._z_dot(self.x + h * k3, u)
-            self.x = self.x + (h / 6) * (k1 + 2 * (k2 + k3) + k4)
+        self.x = self._propagate(self.x, u, dt)
         # Phi P Phi' with the parameters' identity rows exploited (5x cheaper for 13 + 18)
         TP = T @ self.P
         P = self.P.copy()
         P[:, :n, :n] = TP @ T.transpose(0, 2, 1)
         P[:, :n, n:] = TP[:, :, n:]
         P[:, n:, :n] = TP[:, :, n:].transpose(0, 2, 1)
-        P[:, :n, :n] += self.Q * (dt / self.dt)
-        P[:, range(n, size), range(n, size)] += self.parameter_noise**2 * dt
-        self.transition = np.tile(np.eye(size), (self.batch_size, 1, 1))
+        self.P = self._add_process_noise(P, dt)
+        self.transition = np.tile(np.eye(n + self._p), (self.batch_size, 1, 1))
         self.transition[:, :n] = T
-        self.P = (P + P.transpose(0, 2, 1)) * 0.5
         return self.x
 
     def update(self, y: ArrayLike, mask: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
-        N, m = self.batch_size, len(self.measurement_names)
-        y = np.asarray(y, dtype=float)
-        if y.shape != (N, m):
-            raise ValueError(f"y has shape {y.shape}; expected ({N}, {m}): "
-                             f"{', '.join(self.measurement_names)}")
-        valid = np.isfinite(y)
-        if mask is not None:
-            valid &= as_batch("mask", mask, N, m).astype(bool)
+        y, valid = self._measurement(y, mask)
         H, y_hat = self._measurement_jacobian(self.x)
-        e = np.where(valid, y - y_hat, 0.0)
-        if self.angular.size:
-            e[:, self.angular] = _wrap(e[:, self.angular])
-        # missing channels: zero rows of H and unit noise give them exactly zero gain
-        H = H * valid[:, :, None]
-        both = valid[:, :, None] & valid[:, None, :]
-        R = np.where(both, self.R, 0.0) + np.where(valid, 0.0, 1.0)[:, :, None] * np.eye(m)
+        e = self._innovation(y, y_hat, valid)
+        H = H * valid[:, :, None]  # missing channels: zero rows of H and unit noise: zero gain
+        R = self._masked_noise(valid)
         PHt = self.P @ H.transpose(0, 2, 1)
         S = H @ PHt + R
-        sol = np.linalg.solve(S, np.concatenate([PHt.transpose(0, 2, 1), e[:, :, None]], axis=2))
-        K, S_inv_e = sol[:, :, :-1].transpose(0, 2, 1), sol[:, :, -1]
+        K, S_inv_e = self._gain(PHt, S, e)
         self.x = self.x + (K @ e[:, :, None])[:, :, 0]
         IKH = np.eye(self._n + self._p) - K @ H
         P = IKH @ self.P @ IKH.transpose(0, 2, 1) + K @ R @ K.transpose(0, 2, 1)
         self.P = (P + P.transpose(0, 2, 1)) * 0.5
-        self.innovation, self.innovation_cov = e, S
-        self.nis = np.einsum("ij,ij->i", e, S_inv_e)
-        self.dof = valid.sum(axis=1)
-        self._check_health()
+        self._record_update(e, S, S_inv_e, valid)
         return self.x, self.P
 
     # -- offline use -------------------------------------------------------------------------
@@ -407,6 +379,34 @@ class ExtendedKalmanFilter(Estimator):
                              f"(T, {self.batch_size}, {width})")
         return a
 
+    def _input(self, u: ArrayLike, dt: float | None) -> tuple[FloatArray, float]:
+        dt = self.dt if dt is None else float(dt)
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt={dt!r} is invalid: must be > 0 s")
+        u = as_batch("u", u, self.batch_size, self.n_inputs)
+        if not np.isfinite(u).all():
+            raise ValueError("u has non-finite entries")
+        return u, dt
+
+    def _propagate(self, z: FloatArray, u: FloatArray, dt: float) -> FloatArray:
+        """Augmented states ``z`` ``(R, n + p)`` after ``dt`` s of RK4 with inputs ``u`` held."""
+        h = dt / self.substeps
+        for _ in range(self.substeps):
+            k1 = self._z_dot(z, u)
+            k2 = self._z_dot(z + 0.5 * h * k1, u)
+            k3 = self._z_dot(z + 0.5 * h * k2, u)
+            k4 = self._z_dot(z + h * k3, u)
+            z = z + (h / 6) * (k1 + 2 * (k2 + k3) + k4)
+        return z
+
+    def _add_process_noise(self, P: FloatArray, dt: float) -> FloatArray:
+        """``P`` plus the model states' and the parameters' process noise over ``dt``,
+        symmetrised."""
+        n, size = self._n, self._n + self._p
+        P[:, :n, :n] += self.Q * (dt / self.dt)
+        P[:, range(n, size), range(n, size)] += self.parameter_noise**2 * dt
+        return (P + P.transpose(0, 2, 1)) * 0.5
+
     def _z_dot(self, z: FloatArray, u: FloatArray) -> FloatArray:
         out = np.zeros_like(z)
         out[:, :self._n] = self.f(z[:, :self._n], u, z[:, self._n:])
@@ -451,6 +451,48 @@ class ExtendedKalmanFilter(Estimator):
         H[:, :, :n] = ((values[:, 0] - values[:, 1]) / (2 * step[:, :, None])).transpose(0, 2, 1)
         return H, self.h(x)
 
+    def _measurement(self, y: ArrayLike, mask: ArrayLike | None
+                     ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """``y`` checked against the channels, and which entries are valid (finite and masked
+        in)."""
+        N, m = self.batch_size, len(self.measurement_names)
+        y = np.asarray(y, dtype=float)
+        if y.shape != (N, m):
+            raise ValueError(f"y has shape {y.shape}; expected ({N}, {m}): "
+                             f"{', '.join(self.measurement_names)}")
+        valid = np.isfinite(y)
+        if mask is not None:
+            valid &= as_batch("mask", mask, N, m).astype(bool)
+        return y, valid
+
+    def _innovation(self, y: FloatArray, y_hat: FloatArray,
+                    valid: NDArray[np.bool_]) -> FloatArray:
+        e = np.where(valid, y - y_hat, 0.0)
+        if self.angular.size:
+            e[:, self.angular] = _wrap(e[:, self.angular])
+        return e
+
+    def _masked_noise(self, valid: NDArray[np.bool_]) -> FloatArray:
+        """``R`` per filter with missing channels' rows and columns replaced by the identity."""
+        m = valid.shape[1]
+        both = valid[:, :, None] & valid[:, None, :]
+        return np.where(both, self.R, 0.0) + np.where(valid, 0.0, 1.0)[:, :, None] * np.eye(m)
+
+    @staticmethod
+    def _gain(cross: FloatArray, S: FloatArray, e: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Kalman gain ``K = C S^-1`` ``(N, n, m)`` from the state-measurement cross covariance
+        ``C`` and ``S^-1 e``, in one batched solve."""
+        sol = np.linalg.solve(S, np.concatenate([cross.transpose(0, 2, 1), e[:, :, None]],
+                                                axis=2))
+        return sol[:, :, :-1].transpose(0, 2, 1), sol[:, :, -1]
+
+    def _record_update(self, e: FloatArray, S: FloatArray, S_inv_e: FloatArray,
+                       valid: NDArray[np.bool_]) -> None:
+        self.innovation, self.innovation_cov = e, S
+        self.nis = np.einsum("ij,ij->i", e, S_inv_e)
+        self.dof = valid.sum(axis=1)
+        self._check_health()
+
     def _check_health(self) -> None:
         """Flag filters whose estimate is not finite or whose running NIS mean (over ~20
         updates) exceeds ``divergence_ratio`` times its expected value."""
@@ -464,6 +506,69 @@ class ExtendedKalmanFilter(Estimator):
             if self.reinitialise_diverged:
                 self.reset(idx=np.flatnonzero(bad))
                 self.diverged = self.diverged | bad
+
+
+class UnscentedKalmanFilter(ExtendedKalmanFilter):
+    """The unscented variant: no Jacobians; the mean and covariance are carried through the
+    nonlinear dynamics and measurement by ``2 L`` sigma points ``x +- sqrt(L) columns of
+    chol(P)`` with equal weights (the spherical cubature rule: no negative weight, so the
+    covariance stays positive definite for any state size ``L = n + p``).
+
+    Same arguments, attributes and offline methods as :class:`ExtendedKalmanFilter` (``jacobian``
+    and ``parameter_jacobian`` are not used). Its ``transition`` is the statistical
+    linearisation ``Phi = C' P^-1`` (``C`` the cross covariance of the sigma points before and
+    after the step), with which :func:`rts_smooth` is the unscented RTS smoother. Each step costs
+    ``2 L`` evaluations of ``f`` per RK4 stage.
+    """
+
+    def predict(self, u: ArrayLike, dt: float | None = None) -> FloatArray:
+        u, dt = self._input(u, dt)
+        X = _sigma_points(self.x, self.P)  # (N, 2L, L)
+        N, M, L = X.shape
+        Y = self._propagate(X.reshape(N * M, L), np.repeat(u, M, axis=0), dt).reshape(N, M, L)
+        x = Y.mean(axis=1)
+        dX, dY = X - self.x[:, None], Y - x[:, None]
+        cross = dX.transpose(0, 2, 1) @ dY / M
+        self.transition = np.linalg.solve(self.P, cross).transpose(0, 2, 1)
+        self.x = x
+        self.P = self._add_process_noise(dY.transpose(0, 2, 1) @ dY / M, dt)
+        return self.x
+
+    def update(self, y: ArrayLike, mask: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
+        y, valid = self._measurement(y, mask)
+        X = _sigma_points(self.x, self.P)
+        N, M, L = X.shape
+        rows = X.reshape(N * M, L)[:, :self._n]
+        Y = (rows @ self._H[:, :self._n].T if self._H is not None else self.h(rows))
+        Y = Y.reshape(N, M, -1)
+        y_hat = Y.mean(axis=1)
+        dY = Y - y_hat[:, None]
+        if self.angular.size:  # spreads of a wrapped channel about its mean, not across +-pi
+            dY[:, :, self.angular] = _wrap(dY[:, :, self.angular])
+        dY = dY * valid[:, None, :]  # missing channels: no correlation, unit noise: zero gain
+        dX = X - self.x[:, None]
+        S = dY.transpose(0, 2, 1) @ dY / M + self._masked_noise(valid)
+        cross = dX.transpose(0, 2, 1) @ dY / M
+        e = self._innovation(y, y_hat, valid)
+        K, S_inv_e = self._gain(cross, S, e)
+        self.x = self.x + (K @ e[:, :, None])[:, :, 0]
+        P = self.P - K @ S @ K.transpose(0, 2, 1)
+        self.P = (P + P.transpose(0, 2, 1)) * 0.5
+        self._record_update(e, S, S_inv_e, valid)
+        return self.x, self.P
+
+
+def _sigma_points(x: FloatArray, P: FloatArray) -> FloatArray:
+    """``x +- sqrt(L) S`` columns, ``S S' = P`` (Cholesky; an eigen-decomposition with negative
+    eigenvalues clipped if P lost definiteness): ``(N, 2 L, L)``."""
+    L = x.shape[1]
+    try:
+        root = np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        w, V = np.linalg.eigh(P)
+        root = V * np.sqrt(np.maximum(w, 0.0))[:, None, :]
+    spread = math.sqrt(L) * root.transpose(0, 2, 1)  # rows: the columns of the root
+    return np.concatenate([x[:, None] + spread, x[:, None] - spread], axis=1)
 
 
 def rts_smooth(result: FilterResult) -> SmootherResult:
@@ -508,4 +613,4 @@ def _transition_rows(A: FloatArray) -> FloatArray:
 
 
 __all__ = ["Dynamics", "ExtendedKalmanFilter", "FilterResult", "Jacobian", "SmootherResult",
-           "rts_smooth"]
+           "UnscentedKalmanFilter", "rts_smooth"]

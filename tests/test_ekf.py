@@ -182,3 +182,54 @@ def test_bad_input_is_refused_with_a_message_naming_it():
     with pytest.raises(ValueError, match=r"\['N_Xyz'\] are unknown"):
         ExtendedKalmanFilter.from_model(model, 0.1, measured=["r"], Q=np.ones(6), R=[1.0],
                                         parameters=["N_Xyz"])
+
+
+def ukf(**kwargs):
+    from estimators.ekf import UnscentedKalmanFilter
+
+    kwargs = {"x0": [0.0, 0.0, 0.8], "P0": np.diag([1.0, 1.0, 1.0]), "substeps": 2,
+              "parameter_names": ["w"], "Q": [1e-8, 1e-6], "R": [1e-4], **kwargs}
+    return UnscentedKalmanFilter(oscillator, [[1.0, 0.0]], dt=DT, n_inputs=1,
+                                 state_names=["x", "x_dot"], measurement_names=["x"], **kwargs)
+
+
+def test_unscented_filter_of_a_linear_model_is_the_kalman_filter():
+    from estimators.ekf import UnscentedKalmanFilter
+
+    rng = np.random.default_rng(7)
+    F, G = zoh(A, B, DT)
+    Q, R = np.diag([1e-4, 1e-3]), np.array([[0.01]])
+    kf = KalmanFilter(F, G, [[1.0, 0.0]], Q, R, dt=DT)
+    filt = UnscentedKalmanFilter(lambda x, u, t: x @ A.T + u @ B.T, [[1.0, 0.0]], dt=DT, Q=Q,
+                                 R=R, n_inputs=1, state_names=["a", "b"],
+                                 measurement_names=["y"], substeps=4)
+    for _ in range(50):
+        u, y = rng.normal(size=(1, 1)), rng.normal(size=(1, 1))
+        kf.update(y)
+        filt.update(y)
+        kf.predict(u)
+        filt.predict(u)
+    np.testing.assert_allclose(filt.P, kf.P, rtol=1e-6)
+    np.testing.assert_allclose(filt.transition[0], F, atol=1e-6)
+
+
+def test_unscented_filter_is_honest_about_its_error_where_the_ekf_is_not():
+    """From a far initial guess the EKF's linearisation makes it overconfident early on; the
+    sigma points carry the spread through the nonlinearity (NEES = error^2 / variance)."""
+    honest = {"ekf": 0, "ukf": 0}
+    for seed in range(10):
+        us, ys = simulate_oscillator(lambda t: 1.3, 31, seed=seed)
+        for name, make in (("ekf", oscillator_ekf), ("ukf", ukf)):
+            res = make(x0=[0.0, 0.0, 0.5]).filter(us, ys)
+            nees = (res.x[30, 0, 2] - 1.3) ** 2 / res.P[30, 0, 2, 2]
+            honest[name] += bool(nees < 9)
+    assert honest["ukf"] >= 7 and honest["ekf"] <= 3, honest
+
+
+def test_unscented_filter_identifies_and_smooths():
+    us, ys = simulate_oscillator(lambda t: 1.3, 300, seed=8)
+    sm = ukf().smooth(us, ys)
+    assert abs(sm.filtered.x[-1, 0, 2] - 1.3) < 3e-3
+    truth = simulate_truth(us)
+    assert np.abs(sm.x[20:, 0, 1] - truth[20:, 1]).mean() < \
+        np.abs(sm.filtered.x[20:, 0, 1] - truth[20:, 1]).mean()
