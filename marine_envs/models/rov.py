@@ -76,18 +76,27 @@ costs one (12 x 41) GEMM, a scaling and a 6x6 product (one 6-row GEMM with ``M_0
 when the whole batch is in cruise shape). Without a current the hydrodynamic and rigid-body
 ``omega nu`` products coincide and are folded together. A single boat takes a path on Python
 floats with the same feature layout.
+
+**Identification** (seed 002). :data:`SEED_COEFFICIENTS` are the 18 viscous coefficients the seed
+identifies online. ``tau_hyd`` is linear in every coefficient:
+:meth:`ROVModel.hydrodynamic_regressors` gives its exact regressor ``Phi``;
+:meth:`ROVModel.rhs_with` takes a coefficient's value AT THE CURRENT SHAPE (what an online
+identifier sees) and is ``rhs(x, u + Phi (theta - c(s)), d)``;
+:meth:`ROVModel.parameter_jacobian` is the exact ``[M(s)^-1 Phi; 0]``.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import numbers
+from collections.abc import Mapping, Sequence
 from typing import ClassVar, Literal
 
 import numpy as np
 import scipy.linalg
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .base import FloatArray, VehicleModel, require
 
@@ -140,6 +149,10 @@ HYDRO_COEFFICIENTS: tuple[str, ...] = (
     "Xuu", "Xwq", "Xqq", "Xvr", "Xrr", "Yvv", "Yrr", "Yuv", "Ywp", "Yur", "Ypq",
     "Zww", "Zqq", "Zuw", "Zvp", "Zuq", "Zrp", "Kpp", "Mww", "Mqq", "Muw", "Muq", "Mvp", "Mrp",
     "Nvv", "Nrr", "Nuv", "Nur", "Nwp", "Npq")
+#: The 18 viscous coefficients that seed 002 identifies online (its order; MODELS.md names).
+SEED_COEFFICIENTS: tuple[str, ...] = (
+    "Xuu", "Yvv", "Yuv", "Zww", "Zuw", "Yrr", "Yur", "Zqq", "Zuq", "Mww", "Muw", "Nvv", "Nuv",
+    "Kpp", "Mqq", "Muq", "Nrr", "Nur")
 _SHAPE = (*HYDRO_COEFFICIENTS, "xG", "yG", "zG", "xB", "yB", "zB", "Ixx", "Iyy", "Izz")
 _DISSIPATIVE = ("Xuu", "Yvv", "Zww", "Kpp", "Mqq", "Nrr")
 _ADDED_MASS_DIAGONAL = ("Xud", "Yvd", "Zwd", "Kpd", "Mqd", "Nrd")
@@ -317,24 +330,26 @@ _STILL = slice(9, 41)  # features used in still water, where omega nu_r = omega 
 _N_FEATURES = 41
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
 _X, _Y, _Z, _K, _M, _N = range(6)
+_AB, _AN = _ABS.start, _ANG.start
+#: coefficient -> (feature row of F, force component) of its single term in tau_hyd
+_HYDRO_ENTRIES: dict[str, tuple[int, int]] = {
+    "Xuu": (_AB, _X), "Yvv": (_AB + 1, _Y), "Nvv": (_AB + 1, _N), "Zww": (_AB + 2, _Z),
+    "Mww": (_AB + 2, _M), "Kpp": (_AB + 3, _K), "Zqq": (_AB + 4, _Z), "Mqq": (_AB + 4, _M),
+    "Yrr": (_AB + 5, _Y), "Nrr": (_AB + 5, _N),
+    "Yuv": (_UV, _Y), "Nuv": (_UV, _N), "Zuw": (_UW, _Z), "Muw": (_UW, _M),
+    "Zvp": (1, _Z), "Mvp": (1, _M), "Ywp": (2, _Y), "Nwp": (2, _N),  # p v_r, p w_r
+    "Zuq": (3, _Z), "Muq": (3, _M), "Xwq": (5, _X),  # q u_r, q w_r
+    "Yur": (6, _Y), "Nur": (6, _N), "Xvr": (7, _X),  # r u_r, r v_r
+    "Xqq": (_AN + 1, _X), "Xrr": (_AN + 2, _X), "Ypq": (_AN + 3, _Y), "Npq": (_AN + 3, _N),
+    "Zrp": (_AN + 4, _Z), "Mrp": (_AN + 4, _M),
+}
 
 
 def _coefficient_matrix(k: ROVParams, c: dict[str, float]) -> FloatArray:
     """(41, 6) matrix C with tau_total = C^T F for the shape ``c`` (affine in ``c``)."""
     C = np.zeros((_N_FEATURES, 6))
-    ab, ang = _ABS.start, _ANG.start
-    entries = {  # (feature row, force component): coefficient
-        (ab, _X): "Xuu", (ab + 1, _Y): "Yvv", (ab + 1, _N): "Nvv", (ab + 2, _Z): "Zww",
-        (ab + 2, _M): "Mww", (ab + 3, _K): "Kpp", (ab + 4, _Z): "Zqq", (ab + 4, _M): "Mqq",
-        (ab + 5, _Y): "Yrr", (ab + 5, _N): "Nrr",
-        (_UV, _Y): "Yuv", (_UV, _N): "Nuv", (_UW, _Z): "Zuw", (_UW, _M): "Muw",
-        (1, _Z): "Zvp", (1, _M): "Mvp", (2, _Y): "Ywp", (2, _N): "Nwp",  # p v, p w
-        (3, _Z): "Zuq", (3, _M): "Muq", (5, _X): "Xwq",  # q u, q w
-        (6, _Y): "Yur", (6, _N): "Nur", (7, _X): "Xvr",  # r u, r v
-        (ang + 1, _X): "Xqq", (ang + 2, _X): "Xrr", (ang + 3, _Y): "Ypq", (ang + 3, _N): "Npq",
-        (ang + 4, _Z): "Zrp", (ang + 4, _M): "Mrp",
-    }
-    for (row, col), name in entries.items():
+    ang = _ANG.start
+    for name, (row, col) in _HYDRO_ENTRIES.items():
         C[row, col] = c[name]
     # rigid-body Coriolis, part linear in nu1: a = omega x nu1
     r_G = np.array([c["xG"], c["yG"], c["zG"]])
@@ -360,6 +375,80 @@ def _coefficient_matrix(k: ROVParams, c: dict[str, float]) -> FloatArray:
     C[res + 2, [_Z, _K, _M]] = wb, gy, -gx
     C[_TAU] = np.eye(6)
     return C
+
+
+def _shape_free(hydro: Mapping[str, ArrayLike],
+                other: Mapping[str, ArrayLike]) -> dict[str, ArrayLike]:
+    """Parameters for the generic ``rhs_with``: a coefficient's value at the current shape is
+    the same cruise and work value (then ``c(s)`` is that value for every ``s``)."""
+    clash = [f"work_{n}" for n in hydro if f"work_{n}" in other]
+    if clash:
+        raise ValueError(f"params give both {clash} and the coefficient at the current shape; "
+                         "give one of them")
+    both = dict(other)
+    for name, value in hydro.items():
+        both[name] = value
+        if name in MORPHING:
+            both[f"work_{name}"] = value
+    return both
+
+
+def _feature_factors(row: int) -> tuple[int, int]:
+    """The two factors of feature row ``row`` as indices into ``[u_r v_r w_r p q r]``; a
+    second factor of -1 means ``|first|`` (the ``a|a|`` features)."""
+    if row < _OMR.stop:
+        return 3 + row // 3, row % 3  # omega_i nu_r_j
+    if row in (_UV, _UW):
+        return 0, row - _UV + 1
+    if _ABS.start <= row < _ABS.stop:
+        return row - _ABS.start, -1
+    i, j = _PAIRS[row - _ANG.start]
+    return 3 + i, 3 + j
+
+
+@functools.lru_cache(maxsize=64)
+def _hydro_layout(names: tuple[str, ...]):
+    """``(first, second, absolute, select)`` of the coefficients ``names``: factor indices of
+    each feature, which are ``a|a|``, and the (p, 6) map from terms to force rows."""
+    unknown = [n for n in names if n not in _HYDRO_ENTRIES]
+    if unknown:
+        raise ValueError(f"unknown hydrodynamic coefficient(s) {unknown}; known: "
+                         f"{', '.join(HYDRO_COEFFICIENTS)}")
+    factors = np.array([_feature_factors(_HYDRO_ENTRIES[n][0]) for n in names],
+                       dtype=np.intp).reshape(-1, 2)
+    absolute = factors[:, 1] < 0
+    second = np.where(absolute, factors[:, 0], factors[:, 1])
+    select = np.zeros((len(names), 6))
+    select[np.arange(len(names)), [_HYDRO_ENTRIES[n][1] for n in names]] = 1.0
+    return factors[:, 0], second, absolute, select
+
+
+def _hydro_features(motion: FloatArray, first: NDArray[np.intp], second: NDArray[np.intp],
+                    absolute: NDArray[np.bool_]) -> FloatArray:
+    """Features (n, p) of the coefficients from the water-relative motion (n, 6)."""
+    other = motion[:, second]
+    if absolute.any():
+        other[:, absolute] = np.abs(other[:, absolute])
+    return motion[:, first] * other
+
+
+def _relative_motion(x: FloatArray, d: FloatArray) -> FloatArray:
+    """``[u_r v_r w_r p q r]`` (n, 6) of flat states (n, 13) in the NED current of ``d``: the
+    body velocity minus ``R(eta)^T v_c``."""
+    motion = x[:, :6].copy()
+    current = d[:, :3]
+    if not current.any():
+        return motion
+    sphi, sth, spsi = np.sin(x[:, 9:12]).T
+    cphi, cth, cpsi = np.cos(x[:, 9:12]).T
+    vn, ve, vd = current.T
+    a = cpsi * vn + spsi * ve
+    b = cpsi * ve - spsi * vn
+    c = sth * a + cth * vd
+    motion[:, 0] -= cth * a - sth * vd
+    motion[:, 1] -= cphi * b + sphi * c
+    motion[:, 2] -= cphi * c - sphi * b
+    return motion
 
 
 class ROVModel(VehicleModel):
@@ -415,6 +504,7 @@ class ROVModel(VehicleModel):
             lam, V = lam.real, V.real
             L = np.linalg.solve(V, np.linalg.inv(M0))
         self._lam, self._lam_col, self._V = lam, lam[:, None].copy(), np.ascontiguousarray(V)
+        self._L = np.ascontiguousarray(L)
         # nu_dot = V (A F + s B F[_MORPH]) / (1 + s lam); with s = 0 everywhere: nu_dot = P F
         self._A_cur, self._A_still = L @ C0_cur.T, L @ still.T
         self._B = L @ dC[_MORPH].T
@@ -476,6 +566,98 @@ class ROVModel(VehicleModel):
         F, _, _ = self._features(xt, u, d, full=True)
         tau = self._C0T @ F + xt[12] * (self._dCT @ F[_MORPH])
         return tau.T.reshape(*shape, 6)
+
+    def hydrodynamic_regressors(self, x: ArrayLike, names: Sequence[str],
+                                d: ArrayLike | None = None) -> FloatArray:
+        """``d tau_hyd / d theta``: the feature of each coefficient (e.g. ``u_r|u_r|`` for ``Xuu``,
+        on the velocity through the water) in its force row, zero elsewhere. ``tau_hyd`` is linear
+        in the coefficients, so this is exact: ``tau_hyd = regressors @ theta``.
+
+        :param x: states, shape ``(..., 13)``.
+        :param names: coefficients, each one of :data:`HYDRO_COEFFICIENTS` (``p`` of them).
+        :param d: disturbances (current, m/s; morph command), shape ``(..., 4)``; None = zero.
+        :return: shape ``(..., 6, p)``; force rows N or N m per coefficient unit.
+        """
+        first, second, absolute, select = _hydro_layout(tuple(names))
+        x, _, d, shape = self._flat(x, np.zeros(6), d)
+        features = _hydro_features(_relative_motion(x, d), first, second, absolute)
+        out = features[:, None, :] * select.T[None]
+        return out.reshape(*shape, 6, len(first))
+
+    def rhs_with(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,
+                 params: Mapping[str, ArrayLike]) -> FloatArray:
+        """:meth:`rhs` with parameters replaced per batch row.
+
+        A hydrodynamic coefficient (one of :data:`HYDRO_COEFFICIENTS`) gives its value AT THE
+        CURRENT SHAPE ``s``: it replaces the interpolated ``c(s)``, so that an identifier
+        estimates what the hull has now. ``tau_hyd`` is linear in the coefficients and ``tau``
+        enters beside it, so this is exactly ``rhs(x, u + Phi (theta - c(s)), d)`` =
+        ``rhs + [M(s)^-1 Phi (theta - c(s)); 0]`` with ``Phi`` = :meth:`hydrodynamic_regressors`:
+        the model's exact ``M(s)^-1`` at the cost of one ``rhs``. Other names (``m``,
+        ``work_Xuu``, ...) go to the generic path of :meth:`VehicleModel.rhs_with`; mixed with
+        coefficients, each coefficient is passed there as its cruise AND work value (same
+        meaning, slower).
+
+        :param x, u, d: as :meth:`rhs`.
+        :param params: ``{name: value}``, each a scalar or an array broadcasting with the batch
+            shape (e.g. ``(N,)`` for ``x`` of shape ``(N, 13)``), in the parameter's unit.
+        :return: ``x_dot``, shape ``(..., 13)`` over the broadcast batch shape.
+        """
+        hydro = {k: v for k, v in params.items() if k in _HYDRO_ENTRIES}
+        if not hydro:
+            return super().rhs_with(x, u, d, params)
+        if len(hydro) < len(params):
+            other = {k: v for k, v in params.items() if k not in _HYDRO_ENTRIES}
+            return super().rhs_with(x, u, d, _shape_free(hydro, other))
+        x, u, d, theta, shape = self._batch_with(x, u, d, list(hydro.values()))
+        first, second, absolute, select = _hydro_layout(tuple(hydro))
+        cruise, change = self._morph_line(tuple(hydro))
+        features = _hydro_features(_relative_motion(x, d), first, second, absolute)
+        features *= theta - (cruise + x[:, 12:13] * change)
+        return self.rhs(x, u + features @ select, d).reshape(*shape, 13)
+
+    def parameter_jacobian(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,
+                           params: Mapping[str, ArrayLike]) -> FloatArray | None:
+        """``d rhs_with / d params``, shape ``(..., 13, p)`` in the order of ``params``: exact
+        ``[M(s)^-1 Phi; 0]`` when every name is a hydrodynamic coefficient (``rhs_with`` is
+        linear in them, so the values themselves do not matter), else the base class's answer.
+        """
+        if not params or not set(params) <= _HYDRO_ENTRIES.keys():
+            return super().parameter_jacobian(x, u, d, params)
+        x, _, d, _, shape = self._batch_with(x, u, d, list(params.values()))
+        first, second, absolute, select = _hydro_layout(tuple(params))
+        features = _hydro_features(_relative_motion(x, d), first, second, absolute)
+        phi = features[:, None, :] * select.T[None]  # (n, 6, p)
+        # M(s)^-1 = V diag(1 / (1 + s lam)) L, exact for every s
+        scaled = (self._L @ phi) / (1.0 + x[:, 12, None, None] * self._lam[:, None])
+        out = np.zeros((x.shape[0], 13, len(first)))
+        out[:, :6] = self._V @ scaled
+        return out.reshape(*shape, 13, len(first))
+
+    def _batch_with(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,
+                    values: list[ArrayLike]):
+        """Flat ``x, u, d`` and the parameter matrix ``theta`` (n, p) over the broadcast batch
+        shape of the arrays and the parameter values, and that shape."""
+        x, u, d = self._split(x, u, d)
+        arrays = [np.asarray(v, dtype=float) for v in values]
+        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], d.shape[:-1],
+                                    *(a.shape for a in arrays))
+        size = math.prod(shape)
+        x, u, d = (a.reshape(-1, a.shape[-1]) if a.shape[:-1] == shape else
+                   np.broadcast_to(a, (*shape, a.shape[-1])).reshape(-1, a.shape[-1])
+                   for a in (x, u, d))
+        theta = np.empty((size, len(arrays)))
+        for j, a in enumerate(arrays):
+            theta[:, j] = a.reshape(-1) if a.shape == shape else np.broadcast_to(a, shape).ravel()
+        return x, u, d, theta, shape
+
+    def _morph_line(self, names: tuple[str, ...]) -> tuple[FloatArray, FloatArray]:
+        """Cruise values and work-minus-cruise changes of ``names``: ``c(s) = c_0 + s dc``."""
+        k = self.params
+        cruise = np.array([getattr(k, n) for n in names])
+        change = np.array([getattr(k, f"work_{n}") - getattr(k, n) if n in MORPHING else 0.0
+                           for n in names])
+        return cruise, change
 
     def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
         x, u, d, shape = self._flat(x, u, d)
