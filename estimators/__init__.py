@@ -4,6 +4,9 @@
 * :class:`ExtendedKalmanFilter`, with model parameters appended to the state, its unscented
   variant :class:`UnscentedKalmanFilter` and the RTS smoother :func:`rts_smooth` (seeds
   002-004): :mod:`estimators.ekf`;
+* seed 003's wave-frequency pipeline (window, spectrum, Butterworth high-pass, EKF, acceptance)
+  and the DP wave filter it retunes, :class:`WaveFrequencyWrapper`:
+  :mod:`estimators.wave_frequency`;
 * seed 000's quantized-signal PD observer, :class:`QuantizedPDObserver`, and its LMI design
   :func:`design_pd_observer` (needs cvxpy: ``pip install "marine-envs[estimators]"``):
   :mod:`estimators.pd_observer`; the classical :class:`LuenbergerObserver`:
@@ -19,9 +22,10 @@ from .ekf import ExtendedKalmanFilter, UnscentedKalmanFilter, rts_smooth
 from .kalman import AdaptiveKalmanFilter, KalmanFilter
 from .luenberger import LuenbergerObserver
 from .pd_observer import LMIInfeasibleError, QuantizedPDObserver, design_pd_observer
+from .wave_frequency import AdaptiveWaveFilter, WaveFilter, WaveFrequencyWrapper
 from .wrappers import EstimatorWrapper, VectorEstimatorWrapper, wrap
 
-__all__ = ["AdaptiveKalmanFilter", "Estimator", "EstimatorWrapper", "ExtendedKalmanFilter",
-           "KalmanFilter", "LMIInfeasibleError", "LuenbergerObserver", "QuantizedPDObserver",
-           "UnscentedKalmanFilter", "VectorEstimatorWrapper", "design_pd_observer", "rts_smooth",
-           "wrap"]
+__all__ = ["AdaptiveKalmanFilter", "AdaptiveWaveFilter", "Estimator", "EstimatorWrapper",
+           "ExtendedKalmanFilter", "KalmanFilter", "LMIInfeasibleError", "LuenbergerObserver",
+           "QuantizedPDObserver", "UnscentedKalmanFilter", "VectorEstimatorWrapper", "WaveFilter",
+           "WaveFrequencyWrapper", "design_pd_observer", "rts_smooth", "wrap"]

@@ -212,3 +212,9 @@ def test_hovercraft_zigzag_mode_runs_the_manoeuvre_whatever_the_actions(test):
     assert max(heading) > amplitude and min(heading) < -amplitude  # it overshoots both ways
     with pytest.raises(ValueError, match="zigzag"):
         gym.make("marine_envs/Hovercraft-v0", zigzag="20 by 20")
+
+
+def test_dp_vessel_in_a_calm_sea_starts_without_wave_motion():
+    env = gym.make("marine_envs/DPVessel-v0", params={"sigma_eta": [0.0, 0.0, 0.0]})
+    _, info = env.reset(seed=0)
+    assert np.all(info["state"][9:15] == 0)

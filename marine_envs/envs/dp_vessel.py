@@ -41,13 +41,15 @@ def _stationary_initial_state(model: DPVesselModel, spread: Mapping[str, float],
     position = uniform_initial_state(model, spread, centre=setpoint)
     # stationary covariance of the WF filters: A P + P A' + E E' = 0
     wave_cov = scipy.linalg.solve_continuous_lyapunov(p.A_w, -p.E_w @ p.E_w.T)
-    wave_chol = np.linalg.cholesky(wave_cov)
+    # a square root by eigenvalues: a calm DOF (sigma_eta = 0) makes the covariance singular
+    w, V = np.linalg.eigh((wave_cov + wave_cov.T) / 2)
+    wave_root = V * np.sqrt(np.maximum(w, 0.0))
     bias_std = np.asarray(p.sigma_b, dtype=float)
 
     def draw(rng: np.random.Generator) -> np.ndarray:
         x = position(rng)
         x[6:9] = bias_std * rng.standard_normal(3)
-        x[9:15] = wave_chol @ rng.standard_normal(6)
+        x[9:15] = wave_root @ rng.standard_normal(6)
         return x
 
     return draw
