@@ -95,3 +95,18 @@ def check_covariance(name: str, value: ArrayLike, n: int) -> NDArray[np.float64]
     if lowest < -1e-10 * max(1.0, np.abs(a).max()):
         raise ValueError(f"{name} is not positive semi-definite (smallest eigenvalue {lowest:.3g})")
     return a
+
+
+def check_measurement(y: ArrayLike, mask: ArrayLike | None, names: tuple[str, ...],
+                      batch_size: int, dtype: type | np.dtype = np.float64
+                      ) -> tuple[NDArray[np.floating], NDArray[np.bool_]]:
+    """``y`` as an ``(N, m)`` array of the channels ``names``, and which entries are valid
+    (finite and masked in); a ValueError names the shape expected."""
+    N, m = batch_size, len(names)
+    y = np.asarray(y, dtype=dtype)
+    if y.shape != (N, m):
+        raise ValueError(f"y has shape {y.shape}; expected ({N}, {m}): {', '.join(names)}")
+    valid = np.isfinite(y)
+    if mask is not None:
+        valid &= as_batch("mask", mask, N, m).astype(bool)
+    return y, valid

@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from marine_envs.models import VehicleModel
 
-from .base import Estimator, as_batch, check_covariance
+from .base import Estimator, as_batch, check_covariance, check_measurement
 from .kalman import _wrap, _wrapped_channels, default_measurement_noise, default_process_noise
 
 FloatArray = NDArray[np.float64]
@@ -312,7 +312,7 @@ class ExtendedKalmanFilter(Estimator):
         return self.x
 
     def update(self, y: ArrayLike, mask: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
-        y, valid = self._measurement(y, mask)
+        y, valid = check_measurement(y, mask, self.measurement_names, self.batch_size)
         H, y_hat = self._measurement_jacobian(self.x)
         e = self._innovation(y, y_hat, valid)
         H = H * valid[:, :, None]  # missing channels: zero rows of H and unit noise: zero gain
@@ -451,20 +451,6 @@ class ExtendedKalmanFilter(Estimator):
         H[:, :, :n] = ((values[:, 0] - values[:, 1]) / (2 * step[:, :, None])).transpose(0, 2, 1)
         return H, self.h(x)
 
-    def _measurement(self, y: ArrayLike, mask: ArrayLike | None
-                     ) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """``y`` checked against the channels, and which entries are valid (finite and masked
-        in)."""
-        N, m = self.batch_size, len(self.measurement_names)
-        y = np.asarray(y, dtype=float)
-        if y.shape != (N, m):
-            raise ValueError(f"y has shape {y.shape}; expected ({N}, {m}): "
-                             f"{', '.join(self.measurement_names)}")
-        valid = np.isfinite(y)
-        if mask is not None:
-            valid &= as_batch("mask", mask, N, m).astype(bool)
-        return y, valid
-
     def _innovation(self, y: FloatArray, y_hat: FloatArray,
                     valid: NDArray[np.bool_]) -> FloatArray:
         e = np.where(valid, y - y_hat, 0.0)
@@ -535,7 +521,7 @@ class UnscentedKalmanFilter(ExtendedKalmanFilter):
         return self.x
 
     def update(self, y: ArrayLike, mask: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
-        y, valid = self._measurement(y, mask)
+        y, valid = check_measurement(y, mask, self.measurement_names, self.batch_size)
         X = _sigma_points(self.x, self.P)
         N, M, L = X.shape
         rows = X.reshape(N * M, L)[:, :self._n]

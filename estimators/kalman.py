@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from marine_envs.models import VehicleModel, zoh
 from marine_envs.sensors import GaussianNoise, Quantizer, WrapAngle
 
-from .base import Estimator, as_batch, check_covariance
+from .base import Estimator, as_batch, check_covariance, check_measurement
 
 FloatArray = NDArray[np.floating]
 
@@ -234,13 +234,7 @@ class KalmanFilter(Estimator):
 
     def update(self, y: ArrayLike, mask: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
         N, m = self.batch_size, self.H.shape[0]
-        y = np.asarray(y, dtype=self.dtype)
-        if y.shape != (N, m):
-            raise ValueError(f"y has shape {y.shape}; expected ({N}, {m}): "
-                             f"{', '.join(self.measurement_names)}")
-        valid = np.isfinite(y)
-        if mask is not None:
-            valid &= as_batch("mask", mask, N, m).astype(bool)
+        y, valid = check_measurement(y, mask, self.measurement_names, N, self.dtype)
         every = bool(valid.all())
         e = y - (self.x @ self._HT + self._d)
         if self.angular.size:
