@@ -7,6 +7,8 @@
 * seed 003's wave-frequency pipeline (window, spectrum, Butterworth high-pass, EKF, acceptance)
   and the DP wave filter it retunes, :class:`WaveFrequencyWrapper`:
   :mod:`estimators.wave_frequency`;
+* identification of model parameters from records (joint EKF, least squares, identifiability and
+  negative-damping checks): :mod:`estimators.identification`;
 * seed 000's quantized-signal PD observer, :class:`QuantizedPDObserver`, and its LMI design
   :func:`design_pd_observer` (needs cvxpy: ``pip install "marine-envs[estimators]"``):
   :mod:`estimators.pd_observer`; the classical :class:`LuenbergerObserver`:
