@@ -515,7 +515,10 @@ class UnscentedKalmanFilter(ExtendedKalmanFilter):
         x = Y.mean(axis=1)
         dX, dY = X - self.x[:, None], Y - x[:, None]
         cross = dX.transpose(0, 2, 1) @ dY / M
-        self.transition = np.linalg.solve(self.P, cross).transpose(0, 2, 1)
+        try:
+            self.transition = np.linalg.solve(self.P, cross).transpose(0, 2, 1)
+        except np.linalg.LinAlgError:  # a state known exactly (zero variance)
+            self.transition = (np.linalg.pinv(self.P, hermitian=True) @ cross).transpose(0, 2, 1)
         self.x = x
         self.P = self._add_process_noise(dY.transpose(0, 2, 1) @ dY / M, dt)
         return self.x
