@@ -254,6 +254,16 @@ class ExtendedKalmanFilter(Estimator):
         return self.x[:, self._n:]
 
     @property
+    def transition(self) -> FloatArray:
+        """``Phi`` ``(N, n + p, n + p)`` of the last prediction (identity before the first); the
+        smoother needs it, the filter itself only its model rows."""
+        if self._transition is None:
+            n, size = self._n, self._n + self._p
+            self._transition = np.tile(np.eye(size), (self.batch_size, 1, 1))
+            self._transition[:, :n] = self._transition_model_rows
+        return self._transition
+
+    @property
     def std(self) -> FloatArray:
         """Standard deviation of every estimated state and parameter, ``(N, n + p)``."""
         return np.sqrt(np.maximum(np.diagonal(self.P, axis1=1, axis2=2), 0.0))
@@ -275,7 +285,7 @@ class ExtendedKalmanFilter(Estimator):
         self.dof = np.zeros(batch_size, dtype=np.intp)
         self._nis_mean = np.full(batch_size, float(m))
         self.diverged = np.zeros(batch_size, dtype=bool)
-        self.transition = np.tile(np.eye(size), (batch_size, 1, 1))
+        self._transition: FloatArray | None = np.tile(np.eye(size), (batch_size, 1, 1))
         if hasattr(self, "_disturbance_row"):
             self.disturbance = np.tile(self._disturbance_row, (batch_size, 1))
 
@@ -307,8 +317,7 @@ class ExtendedKalmanFilter(Estimator):
         P[:, :n, n:] = TP[:, :, n:]
         P[:, n:, :n] = TP[:, :, n:].transpose(0, 2, 1)
         self.P = self._add_process_noise(P, dt)
-        self.transition = np.tile(np.eye(n + self._p), (self.batch_size, 1, 1))
-        self.transition[:, :n] = T
+        self._transition_model_rows, self._transition = T, None  # assembled when asked for
         return self.x
 
     def update(self, y: ArrayLike, mask: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
@@ -516,9 +525,9 @@ class UnscentedKalmanFilter(ExtendedKalmanFilter):
         dX, dY = X - self.x[:, None], Y - x[:, None]
         cross = dX.transpose(0, 2, 1) @ dY / M
         try:
-            self.transition = np.linalg.solve(self.P, cross).transpose(0, 2, 1)
+            self._transition = np.linalg.solve(self.P, cross).transpose(0, 2, 1)
         except np.linalg.LinAlgError:  # a state known exactly (zero variance)
-            self.transition = (np.linalg.pinv(self.P, hermitian=True) @ cross).transpose(0, 2, 1)
+            self._transition = (np.linalg.pinv(self.P, hermitian=True) @ cross).transpose(0, 2, 1)
         self.x = x
         self.P = self._add_process_noise(dY.transpose(0, 2, 1) @ dY / M, dt)
         return self.x
