@@ -38,8 +38,6 @@ FloatArray = NDArray[np.float64]
 MIN_SAMPLES, MIN_DURATION = 300, 60.0
 #: A channel moves "beyond its noise" when its spread exceeds this many noise deviations.
 MIN_SIGNAL_TO_NOISE = 5.0
-#: A confidence at or above this is a claim.
-CLAIM = 0.5
 
 
 @dataclass

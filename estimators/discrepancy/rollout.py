@@ -82,7 +82,8 @@ class Rollouts:
     def errors(self, effects: Sequence[Effect],
                forcing: Mapping[int, FloatArray] | None = None) -> FloatArray:
         """Weighted squared prediction error per start ``(S,)``."""
-        r = self.target - self.predict(effects, forcing)
+        with np.errstate(over="ignore", invalid="ignore"):  # a wild trial value may overflow
+            r = self.target - self.predict(effects, forcing)
         return np.minimum(np.sum(r * r * self.weights, axis=(1, 2)), 1e30)
 
     def improvement(self, before: FloatArray, after: FloatArray) -> float:
