@@ -269,6 +269,15 @@ class ActuatorStream:
         return u
 
 
+def rk4(f, x: FloatArray, t: float | FloatArray, h: float) -> FloatArray:
+    """One classical Runge-Kutta step of ``x_dot = f(x, t)`` over ``h`` seconds."""
+    k1 = f(x, t)
+    k2 = f(x + h / 2 * k1, t + h / 2)
+    k3 = f(x + h / 2 * k2, t + h / 2)
+    k4 = f(x + h * k3, t + h)
+    return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
 # -- a model with effects -------------------------------------------------------------------------
 class EffectModel:
     """A vehicle model with catalogue effects added (the "true" physics of a generated record).

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 
-from .effects import KEY_PARAMETER, ActuatorStream, Effect, EffectModel, resonator
+from .effects import KEY_PARAMETER, ActuatorStream, Effect, EffectModel, resonator, rk4
 from .models import VehicleModel, get_model, zoh
 from .recording import Recording
 from .sea.processes import GaussMarkov
@@ -253,12 +253,11 @@ def _closed_loop(truth: EffectModel, x_ref: np.ndarray, dt: float, sea: float, d
         applied = actuator.step(u)
         w = {e: f[k] for e, f in forcing.items()}
         t = k * dt
-        for _ in range(substeps):  # RK4 with the input and disturbance held
-            k1 = truth.rhs(x, applied, d[k], t, w)
-            k2 = truth.rhs(x + h / 2 * k1, applied, d[k], t + h / 2, w)
-            k3 = truth.rhs(x + h / 2 * k2, applied, d[k], t + h / 2, w)
-            k4 = truth.rhs(x + h * k3, applied, d[k], t + h, w)
-            x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        def f(z, s, a=applied, dk=d[k], w=w):  # input and disturbance held over the step
+            return truth.rhs(z, a, dk, s, w)
+
+        for _ in range(substeps):
+            x = rk4(f, x, t, h)
             t += h
         if not np.all(np.isfinite(x)):
             raise FloatingPointError(f"the simulated {vehicle.name} diverged at t={t:.1f} s; "

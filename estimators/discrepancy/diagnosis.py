@@ -17,13 +17,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from marine_envs.effects import KEY_PARAMETER, Effect
+from marine_envs.effects import Effect
 
 from .hypotheses import Fitted, Problem, all_hypotheses
 from .residuals import Residuals
@@ -80,17 +79,6 @@ class Selection:
     ranking: list[Scored]
     tried: int
     combined_improvement: float = 0.0
-
-
-def score(problem: Problem, fitted: Fitted, config: DiagnosisConfig, tried: int) -> Scored:
-    """The held-out improvement of one hypothesis on the equation errors, and its corrected
-    significance."""
-    held = ~problem.fit
-    e, c, w = problem.error[held], fitted.contribution[held], problem.weights
-    before, after = np.sum(e * e * w, axis=1), np.sum((e - c) ** 2 * w, axis=1)
-    improvement = float(1 - after.sum() / before.sum()) if before.sum() > 0 else 0.0
-    t, p = _batch_test(before, after, config.batches)
-    return Scored(fitted, improvement, t, min(1.0, p * tried))
 
 
 def in_sample(problem: Problem, fitted: Fitted) -> Scored:
@@ -295,12 +283,3 @@ def _backfit(rollouts: Rollouts, selection: Selection, config: DiagnosisConfig,
         finding.alone = alone.improvement
     selection.combined_improvement = rollouts.improvement(rollouts.errors([]),
                                                           rollouts.errors(*_model(findings)))
-
-
-def _same_fixed(a: Effect, b: Effect) -> bool:
-    keys = ("source", "what", "expression")
-    return all(a.parameters.get(k) == b.parameters.get(k) for k in keys)
-
-
-def key_value(effect: Effect) -> Any:
-    return effect.parameters.get(KEY_PARAMETER[effect.effect])

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
+from marine_envs.effects import rk4
 from marine_envs.models import VehicleModel
 from marine_envs.recording import Recording
 
@@ -69,13 +70,11 @@ class Residuals:
 def rk4_step(model: VehicleModel, x: FloatArray, u: FloatArray, dt: float,
              substeps: int = 1) -> FloatArray:
     """One step of ``dt`` for every row of ``x`` with inputs ``u`` held (no disturbance)."""
-    h = dt / substeps
+    def f(z, _t):
+        return model.rhs(z, u)
+
     for _ in range(substeps):
-        k1 = model.rhs(x, u)
-        k2 = model.rhs(x + h / 2 * k1, u)
-        k3 = model.rhs(x + h / 2 * k2, u)
-        k4 = model.rhs(x + h * k3, u)
-        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x = rk4(f, x, 0.0, dt / substeps)
     return x
 
 

@@ -14,7 +14,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from marine_envs.effects import Effect, EffectModel
+from marine_envs.effects import Effect, EffectModel, rk4
 
 from .residuals import Residuals, _output_matrix
 
@@ -68,13 +68,11 @@ class Rollouts:
             k = self.starts + j
             w = {i: f[k] for i, f in (forcing or {}).items()}
             uk = u[k]
+            def f(z, s, uk=uk, w=w):
+                return truth.rhs(z, uk, None, s, w)
+
             for m in range(res.substeps):
-                t = res.time[k] + m * h
-                k1 = truth.rhs(x, uk, None, t, w)
-                k2 = truth.rhs(x + h / 2 * k1, uk, None, t + h / 2, w)
-                k3 = truth.rhs(x + h / 2 * k2, uk, None, t + h / 2, w)
-                k4 = truth.rhs(x + h * k3, uk, None, t + h, w)
-                x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+                x = rk4(f, x, res.time[k] + m * h, h)
             outputs = x if self._outputs_are_states else model.output(x)
             out[:, j] = truth.measure(outputs[:, self.channel_index], res.channels)
         return np.nan_to_num(out, nan=1e6, posinf=1e6, neginf=-1e6)
