@@ -28,6 +28,7 @@ import sys
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # _common, also under pytest
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -35,6 +36,7 @@ import time  # noqa: E402
 
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
+from _common import pin_to_one_cpu  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
 import marine_envs  # noqa: E402, F401 - registers the environments
@@ -147,15 +149,6 @@ def format_table(rows: list[dict]) -> str:
         lines.append(f"{row['filter']:<28}{row['N']:>6}{row['env_updates_per_s']:>16.3g}"
                      f"{row['ratio']:>9.1f}x  {status}")
     return "\n".join(lines)
-
-
-def pin_to_one_cpu() -> str:
-    """Pin the process to the first CPU it may use (Linux); say what was done."""
-    if not hasattr(os, "sched_setaffinity"):
-        return "not pinned (no sched_setaffinity)"
-    cpu = min(os.sched_getaffinity(0))
-    os.sched_setaffinity(0, {cpu})
-    return f"pinned to CPU {cpu}"
 
 
 def main() -> int:

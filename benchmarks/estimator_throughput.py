@@ -34,6 +34,7 @@ import sys
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # _common, also under pytest
 
 import argparse  # noqa: E402
 import json  # noqa: E402
@@ -43,6 +44,7 @@ from dataclasses import dataclass  # noqa: E402
 from typing import TYPE_CHECKING  # noqa: E402
 
 import numpy as np  # noqa: E402
+from _common import pin_to_one_cpu  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 
 from estimators.kalman import AdaptiveKalmanFilter, KalmanFilter  # noqa: E402
@@ -385,15 +387,6 @@ def float32_sequential(steps: int, seed: int = 4, chunk: int = 1000) -> dict:
 
 
 # -- the run ----------------------------------------------------------------------------------
-def pin_to_one_cpu() -> str:
-    """Pin the process to the first CPU it may use (Linux); say what was done."""
-    if not hasattr(os, "sched_setaffinity"):
-        return "not pinned (no sched_setaffinity)"
-    cpu = min(os.sched_getaffinity(0))
-    os.sched_setaffinity(0, {cpu})
-    return f"pinned to CPU {cpu}"
-
-
 def run_checks(quick: bool, sequential_steps: int) -> list[dict]:
     system = random_system()
     steps = 60 if quick else 200

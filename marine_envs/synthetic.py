@@ -30,8 +30,9 @@ from .sea.processes import GaussMarkov
 DEG = math.pi / 180
 #: Broadband sea per model: (standard deviation per disturbance channel, correlation time, s).
 SEA: dict[str, tuple[tuple[float, ...], float]] = {
-    "usv": ((0.001, 0.001), 2.0),                       # wave moments, rad/s^2
-    "hydrofoil": ((0.01, 0.01, 0.01, 0.01, 0.05, 0.05), 1.0),  # orbital speed, elevation, surge
+    "usv": ((0.0003, 0.0003), 2.0),                     # wave moments, rad/s^2
+    "hydrofoil": ((0.003, 0.003, 0.003, 0.003, 0.015, 0.015), 1.0),  # orbital speed, elevation,
+                                                                      # surge
     "rov": ((0.05, 0.05, 0.01, 0.0), 60.0),             # current, m/s; no morph command
     "dp_vessel": ((1.0,) * 6, 0.0),                     # the model's own white-noise inputs
     "hovercraft": ((2.0, 2.0), 10.0),                   # wind gusts, m/s

@@ -28,7 +28,7 @@ from marine_envs.effects import Effect
 from marine_envs.models import VehicleModel, get_model
 from marine_envs.recording import Recording, read_recording
 
-from .diagnosis import DiagnosisConfig, Scored, Selection, select
+from .diagnosis import DiagnosisConfig, Evaluator, Fitted, Scored, Selection, fit_findings, select
 from .explain import explain
 from .residuals import Residuals, estimate, white_noise_std
 from .rollout import Rollouts
@@ -288,26 +288,42 @@ def _finding(scored: Scored, residuals: Residuals) -> Finding:
 
 
 def _validate(diagnosis: Diagnosis) -> None:
-    """Held-out multi-step prediction errors per channel before and after the findings."""
-    ro, selection = diagnosis.rollouts, diagnosis.selection
-    assert ro is not None and selection is not None
-    effects = [s.fitted.effect for s in selection.findings]
-    forcing = {k: s.fitted.details["forcing"] for k, s in enumerate(selection.findings)
-               if "forcing" in s.fitted.details}
+    """Held-out multi-step prediction errors per channel before and after the findings, the
+    findings refitted on the first part of the record only; each term alone and all together."""
+    ro, selection, res = diagnosis.rollouts, diagnosis.selection, diagnosis.residuals
+    assert ro is not None and selection is not None and res is not None
+    rows = np.arange(len(res.time)) < int(ro.fit_fraction * len(res.time))
+    fitted = fit_findings(res, Evaluator(res.innovations.nu, 1), selection.findings, rows) \
+        if selection.findings else []
+    effects, forcing, shift = findings_model(res, fitted)
+    before = ro.errors([])
+    for scored, term in zip(selection.findings, fitted, strict=True):
+        alone = ro.errors(*findings_model(res, [term]))
+        scored.alone = round(float(ro.improvement(before, alone)), 4)
+    selection.combined_improvement = float(ro.improvement(before,
+                                                          ro.errors(effects, forcing, shift)))
+    for finding, scored in zip(diagnosis.findings, selection.findings, strict=True):
+        finding.improvement = scored.alone
     diagnosis.fit = {
         "before": {"rmse": ro.rmse([])},
-        "after": {"rmse": ro.rmse(effects, forcing)},
-        "improvement": round(float(selection.combined_improvement), 4),
-        "validation": (f"held-out last {1 - ro_fraction(ro):.0%}: {ro.steps}-step "
-                       f"({ro.steps * ro.res.dt:.1f} s) predictions from the smoothed state, "
-                       "error in excess of the sensor noise"),
+        "after": {"rmse": ro.rmse(effects, forcing, shift)},
+        "improvement": round(selection.combined_improvement, 4),
+        "validation": (f"held-out last {1 - ro.fit_fraction:.0%}, findings refitted on the "
+                       f"rest: {ro.steps}-step ({ro.steps * ro.res.dt:.1f} s) predictions from "
+                       "the smoothed state, error in excess of the sensor noise"),
         "terms": [{"effect": s.fitted.effect.effect, "target": s.fitted.effect.target,
-                   "improvement": round(float(s.alone), 4)} for s in selection.findings],
+                   "improvement": s.alone} for s in selection.findings],
     }
 
 
-def ro_fraction(ro: Rollouts) -> float:
-    return float(np.mean(~ro.held)) if len(ro.held) else 0.7
+def findings_model(res: Residuals, fitted: Sequence[Fitted]
+           ) -> tuple[list[Effect], dict[int, FloatArray], FloatArray]:
+    """Effects, wave forcings and smoothed-state shift of fitted findings, as
+    :meth:`Rollouts.predict` takes them."""
+    forcing = {k: f.details["forcing"] for k, f in enumerate(fitted) if "forcing" in f.details}
+    shift = sum((res.innovations.smoothed_shift(f.w, f.v) for f in fitted),  # type: ignore
+                np.zeros_like(res.x))
+    return [f.effect for f in fitted], forcing, shift
 
 
 def _plain(value: Any) -> Any:

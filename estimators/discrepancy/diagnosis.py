@@ -1,22 +1,28 @@
-"""Step 3: pick the hypotheses the held-out data support, fit them jointly and say what they mean.
+"""Step 3: pick the hypotheses the data support, fit them jointly and say how sure we are.
 
-Selection is greedy and validated: every hypothesis is fitted on the first 70 % of the record
-and scored by how much it reduces the weighted equation errors of the last 30 %. The held-out
-reduction is tested batch by batch (ten contiguous batches, a one-sided t-test, robust to the
-errors' autocorrelation) and the p-value multiplied by the number of hypotheses tried
-(Bonferroni), so a search over hundreds of terms does not find one by chance. The best
-significant hypothesis becomes a finding, its contribution is removed, and the search repeats
-until nothing significant is left. The findings are then refitted jointly (backfitting).
+Every family of candidate terms (:mod:`.hypotheses`) is scored by blocked cross-validation of
+the nominal filter's whitened innovations (:mod:`.innovations`): the record is cut into
+``folds`` contiguous blocks, and on each block the family's member and coefficient are chosen
+on the *other* blocks, then the block's innovations are corrected by the term. Every sample is
+thus predicted by a fit that never saw it, so a grid of delays or a library of products pays
+for its freedom, and the whole record validates.
 
-A finding's ``confidence`` is the probability that it is real (one minus the corrected p-value)
-times its share of the evidence among the significant alternatives (Akaike-style weights from the
-t statistics), so two hypotheses that explain the same thing share it.
+The held-out reduction of the squared innovations is tested over short blocks (a
+self-normalised one-sided z-test, see :func:`_gain_test`) and the p-value multiplied by the
+number of families tried (Bonferroni). The best significant family becomes a
+finding and the search repeats with it in the model, until nothing significant is left. The
+findings are then refitted jointly on the whole record (backfitting).
+
+A finding's ``confidence`` is one minus its corrected p-value, times its share of the evidence
+among the significant alternatives (Akaike weights from the held-out log-likelihood gains), so
+two hypotheses that explain the same thing share it.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,46 +30,69 @@ from scipy import stats
 
 from marine_envs.effects import Effect
 
-from .hypotheses import Fitted, Problem, all_hypotheses
+from .hypotheses import Family, all_families, bias_term, change_families
 from .residuals import Residuals
-from .rollout import Rollouts
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
 class DiagnosisConfig:
     """The one configuration every diagnosis uses (no per-vehicle or per-effect tuning).
 
-    :param fit_fraction: the first part of the record used for fitting; the rest validates.
-    :param batches: contiguous validation batches of the significance test.
+    :param folds: contiguous cross-validation blocks.
+    :param block: length of the significance test's blocks, s.
     :param alpha: family-wise significance level of a finding.
     :param max_findings: at most this many effects are reported.
-    :param min_improvement: a finding must remove at least this share of the held-out error.
-    :param shortlist: hypotheses ranked best by the equation errors go on to the multi-step test.
-    :param horizon, stride: multi-step prediction horizon and spacing of its start times, s.
+    :param fit_fraction: the reported validation fits on this first part of the record and
+        predicts the rest.
+    :param horizon, stride: that validation's prediction horizon and start spacing, s.
     """
 
-    fit_fraction: float = 0.7
-    batches: int = 20
+    folds: int = 5
+    block: float = 20.0
     alpha: float = 0.01
     max_findings: int = 3
-    min_improvement: float = 0.02
-    shortlist: int = 24
+    fit_fraction: float = 0.7
     horizon: float = 3.0
     stride: float = 0.5
 
 
 @dataclass
-class Scored:
-    """A fitted hypothesis with its held-out score."""
+class Fitted:
+    """A fitted member of a family.
 
+    :param effect: the catalogue effect with its parameters.
+    :param contribution: its term in the state equations ``(T - 1, n)``, state units per s.
+    :param response: its whitened innovation response ``(T, m)`` (for the joint fits).
+    :param w, v: its term in the state equations ``(T, n)`` and on the channels ``(T, m)``.
+    """
+
+    effect: Effect
+    contribution: FloatArray
+    response: FloatArray
+    free: bool
+    w: FloatArray | None = None
+    v: FloatArray | None = None
+    std: dict[str, float] = field(default_factory=dict)
+    n_parameters: int = 1
+    multiplicity: int = 1
+    details: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Scored:
+    """A family's cross-validated score and its fit on the whole record."""
+
+    family: Family
     fitted: Fitted
-    improvement: float  # share of the held-out weighted error it removes
+    improvement: float  # share of the held-out innovation sum of squares it removes
+    gain: float  # held-out log-likelihood gain, less a BIC charge for extra parameters
     t: float
     p_value: float  # Bonferroni-corrected
     confidence: float = 0.0
-    alone: float = 0.0  # held-out improvement of this term alone (after the joint fit)
+    alone: float = 0.0  # validation improvement of this term alone (set by the api)
 
     @property
     def effect(self) -> Effect:
@@ -72,8 +101,7 @@ class Scored:
 
 @dataclass
 class Selection:
-    """The outcome of the search: the findings, and every hypothesis of the first round ranked
-    (for reports and the confusion tables of the tests)."""
+    """The findings, and every family of the first round ranked (for reports and tests)."""
 
     findings: list[Scored]
     ranking: list[Scored]
@@ -81,205 +109,273 @@ class Selection:
     combined_improvement: float = 0.0
 
 
-def in_sample(problem: Problem, fitted: Fitted) -> Scored:
-    """The share of the fit rows' weighted equation error a hypothesis removes (no test)."""
-    before = problem.sse(np.zeros_like(fitted.contribution))
-    after = problem.sse(fitted.contribution)
-    return Scored(fitted, 1 - after / before if before > 0 else 0.0, 1.0, 1.0)
+# -- least squares on the innovations -------------------------------------------------------------
+@dataclass
+class _Sums:
+    """Sums over a set of rows of the products a joint fit needs: base columns ``B`` (free),
+    target ``t``, family members ``G``."""
+
+    tt: float
+    Bt: FloatArray  # (A,)
+    BB: FloatArray  # (A, A)
+    Gt: FloatArray  # (R,)
+    GG: FloatArray  # (R,)
+    BG: FloatArray  # (A, R)
 
 
+def _member_fits(s: _Sums, free: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """For every member: the sum of squares left, its coefficient, and the base coefficients
+    ``(R,), (R,), (A, R)`` (Frisch-Waugh: the member against the base's residual)."""
+    BBinv = np.linalg.pinv(s.BB) if s.BB.size else s.BB
+    if free:
+        q = BBinv @ s.Bt
+        tt = s.tt - s.Bt @ q
+        Gt = s.Gt - s.BG.T @ q
+        GG = s.GG - np.einsum("ar,ab,br->r", s.BG, BBinv, s.BG)
+        ok = GG > 1e-12 * np.maximum(s.GG, 1e-300)
+        coef = np.where(ok, Gt / np.where(ok, GG, 1.0), 0.0)
+        sse = tt - coef * Gt
+        return sse, coef, q[:, None] - BBinv @ s.BG * coef[None, :]
+    Bt = s.Bt[:, None] - s.BG
+    beta = BBinv @ Bt
+    sse = s.tt - 2 * s.Gt + s.GG - np.einsum("ar,ar->r", Bt, beta)
+    return sse, np.ones_like(sse), beta
+
+
+class Evaluator:
+    """Cross-validated fits of families on top of accepted columns."""
+
+    def __init__(self, nu: FloatArray, folds: int) -> None:
+        T = len(nu)
+        self.nu = nu
+        self.fold = (np.arange(T) * folds) // T
+        self.bounds = np.searchsorted(self.fold, np.arange(folds))
+
+    def _products(self, base: list[Fitted], G: FloatArray | None):
+        t = self.nu - sum((f.response for f in base if not f.free), np.zeros_like(self.nu))
+        B = np.stack([f.response for f in base if f.free], axis=-1) if any(
+            f.free for f in base) else np.zeros(self.nu.shape + (0,))
+        G = np.zeros(self.nu.shape + (0,)) if G is None else G
+        per = {"tt": np.einsum("km,km->k", t, t), "Bt": np.einsum("kma,km->ka", B, t),
+               "BB": np.einsum("kma,kmb->kab", B, B), "Gt": np.einsum("kmr,km->kr", G, t),
+               "GG": np.einsum("kmr,kmr->kr", G, G), "BG": np.einsum("kma,kmr->kar", B, G)}
+        return t, B, G, per
+
+    def cross_validate(self, base: list[Fitted], G: FloatArray | None = None,
+                       free: bool = True) -> FloatArray:
+        """Held-out innovations left ``(T, m)`` by the base plus the family ``G`` ``(T, m, R)``
+        (its member chosen on the other folds), or by the base alone."""
+        t, B, G, per = self._products(base, G)
+        totals = {k: v.sum(axis=0) for k, v in per.items()}
+        folds = {k: np.add.reduceat(v, self.bounds, axis=0) for k, v in per.items()}
+        errors = np.empty_like(t)
+        for f in range(len(self.bounds)):
+            train = _Sums(**{k: totals[k] - folds[k][f] for k in per})
+            rows = self.fold == f
+            residual = t[rows] - B[rows] @ _base_only(train)
+            if G.shape[2]:
+                sse, coef, beta = _member_fits(train, free)
+                r = int(np.argmin(sse))
+                residual = t[rows] - B[rows] @ beta[:, r] - coef[r] * G[rows][:, :, r]
+            errors[rows] = residual
+        return errors
+
+    def fit(self, base: list[Fitted], G: FloatArray, free: bool,
+            rows: BoolArray | None = None) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Every member fitted on ``rows`` (default: all): sums of squares, coefficients and
+        base coefficients, as :func:`_member_fits`."""
+        _, _, _, per = self._products(base, G)
+        sums = _Sums(**{k: (v if rows is None else v[rows]).sum(axis=0) for k, v in per.items()})
+        return _member_fits(sums, free)
+
+
+def _base_only(s: _Sums) -> FloatArray:
+    return np.linalg.pinv(s.BB) @ s.Bt if s.BB.size else s.Bt
+
+
+# -- the search -----------------------------------------------------------------------------------
 def select(residuals: Residuals, config: DiagnosisConfig = DiagnosisConfig()) -> Selection:
-    """Greedy validated search for the effects the residuals support (see the module doc)."""
-    rollouts = Rollouts(residuals, config.fit_fraction, config.horizon, config.stride)
-    error = residuals.error.copy()
+    """Greedy cross-validated search for the effects the record supports (module doc)."""
+    innovations = residuals.innovations
+    assert innovations is not None
+    evaluator = Evaluator(innovations.nu, config.folds)
     findings: list[Scored] = []
     ranking: list[Scored] = []
     tried = 0
     for round_ in range(config.max_findings):
-        problem = Problem.build(residuals, error, config.fit_fraction)
-        candidates = [h for h in all_hypotheses(problem) if not _already(h, findings)]
-        # the shortlist is chosen on the fit rows alone, so the held-out test corrects for it
-        screened = sorted((in_sample(problem, h) for h in candidates),
-                          key=_rank_key, reverse=True)[: config.shortlist]
-        tried = len(screened)
-        scored = sorted((rollout_score(rollouts, findings, refine(rollouts, findings, s.fitted),
-                                       config, tried) for s in screened),
-                        key=_rank_key, reverse=True)
-        _confidences(scored, config)
+        accepted = [s.fitted for s in findings]
+        before = evaluator.cross_validate(accepted)
+        families = [f for f in all_families(residuals)
+                    if f.key not in {s.family.key for s in findings}]
+        tried = len(families)
+        scored = [s for f in families
+                  if (s := _score(residuals, evaluator, accepted, before, f, config, tried))]
+        scored.sort(key=lambda s: s.gain, reverse=True)
+        _confidences(scored)
         if round_ == 0:
             ranking = scored
         best = next(iter(scored), None)
-        if best is None or best.p_value > config.alpha \
-                or best.improvement < config.min_improvement:
+        if best is None or best.p_value > config.alpha or best.gain <= 0:
             break
         findings.append(best)
-        error = error - best.fitted.contribution
-    selection = Selection(findings, ranking, tried)
-    if findings:
-        _backfit(rollouts, selection, config)
-    return selection
+    if len(findings) > 1:
+        _backfit(residuals, evaluator, findings)
+    return Selection(findings, ranking, tried)
 
 
-def rollout_score(rollouts: Rollouts, accepted: list[Scored], fitted: Fitted,
-                  config: DiagnosisConfig, tried: int) -> Scored:
-    """Held-out multi-step improvement of ``fitted`` over the accepted findings, tested over
-    contiguous batches of start times."""
-    base = rollouts.errors(*_model(accepted))
-    new = rollouts.errors(*_model(accepted, fitted))
-    held = rollouts.held
-    t, p = _batch_test(base[held], new[held], config.batches)
-    improvement = rollouts.improvement(base, new)
-    return Scored(fitted, improvement, t, min(1.0, p * tried))
+def _score(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], before: FloatArray,
+           family: Family, config: DiagnosisConfig, tried: int) -> Scored | None:
+    G = res.innovations.response(family.w, family.v)  # type: ignore[union-attr]
+    if not np.any(np.abs(G) > 1e-9):
+        return None  # the measured channels do not see this term
+    after = evaluator.cross_validate(accepted, G, family.free)
+    t, p = _gain_test(before, after, int(round(config.block / res.dt)))
+    sigma2 = float(np.mean(before**2))  # per channel and sample
+    b, a = float(np.sum(before**2)), float(np.sum(after**2))
+    fitted = fit_member(res, evaluator, accepted, family, G)
+    # a simpler term that explains as much is preferred: a BIC charge per extra parameter
+    charge = 0.5 * math.log(before.size) * (family.n_parameters - 1)
+    return Scored(family, fitted, 1 - a / b, (b - a) / (2 * sigma2) - charge, t,
+                  min(1.0, p * tried))
 
 
-def _batch_test(before: FloatArray, after: FloatArray, batches: int) -> tuple[float, float]:
-    """One-sided t-test that the errors shrink, on the log-ratios of contiguous batches' sums of
-    squares (a batch's ratio hardly depends on how much excitation it happened to contain, and
-    the batches are nearly independent even when the errors within one are not)."""
-    pairs = [(b.sum(), a.sum()) for b, a in zip(np.array_split(before, batches),
-                                                 np.array_split(after, batches), strict=True)
-             if b.size]
-    ratios = np.array([math.log(b / a) for b, a in pairs
-                       if 0 < b < math.inf and 0 < a < math.inf])
-    if ratios.size < 3:
-        return 0.0, 1.0
-    spread = ratios.std(ddof=1)
-    t = float(ratios.mean() / (spread / math.sqrt(len(ratios)))) if spread > 0 else 0.0
-    return t, float(stats.t.sf(t, len(ratios) - 1))
-
-
-def _model(accepted: list[Scored], extra: Fitted | None = None):
-    """Effects and wave forcings of the accepted findings (plus one more)."""
-    fitted = [s.fitted for s in accepted] + ([extra] if extra is not None else [])
-    forcing = {k: f.details["forcing"] for k, f in enumerate(fitted) if "forcing" in f.details}
-    return [f.effect for f in fitted], forcing
-
-
-#: Parameters refined by Gauss-Newton (they enter almost linearly) or on a grid (they do not).
-LINEAR = {"current": "b", "linear_damping": "c", "quadratic_damping": "c", "coupling": "c",
-          "nonlinear_damping": "c", "nonlinear_restoring": "c", "parameter_change": "c",
-          "unlisted": "c", "input_gain": "k", "sensor_bias": "b", "wave_frequency": "gain"}
-GRID = {"input_delay": "tau", "input_saturation": "limit", "input_deadzone": "width",
-        "input_rate_limit": "rate"}
-
-
-def refine(rollouts: Rollouts, accepted: list[Scored], fitted: Fitted) -> Fitted:
-    """Refit the hypothesis's free parameter on the fit starts' multi-step predictions (the
-    equation errors' estimate is the starting point)."""
-    effect = fitted.effect
-    if effect.effect == "wave_frequency" and "forcing" not in fitted.details:
-        i = rollouts.res.model.state_names.index(effect.target)
-        column = fitted.contribution[:, i]
-        fitted.details["forcing"] = np.append(column, column[-1])
-        effect = Effect(effect.effect, effect.target, {**effect.parameters, "gain": 1.0})
-    name = LINEAR.get(effect.effect) or GRID[effect.effect]
-    effects, forcing = _model(accepted)
-
-    def cost(value: float) -> float:
-        if not math.isfinite(value):
-            return math.inf
-        trial = _with(effect, name, value, fitted)
-        f = dict(forcing)
-        if "forcing" in fitted.details:
-            f[len(effects)] = fitted.details["forcing"] * trial.parameters.get("gain", 1.0)
-        total = float(rollouts.errors([*effects, trial], f)[rollouts.fit].sum())
-        return total if math.isfinite(total) else math.inf
-
-    value = float(effect.parameters[name])
-    if name in LINEAR.values() and effect.effect in LINEAR:
-        value, std = _gauss_newton(cost, value)
+def fit_member(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], family: Family,
+               G: FloatArray, rows: BoolArray | None = None) -> Fitted:
+    """The family's best member and coefficient on ``rows`` (default: the whole record) given
+    the accepted terms, with standard deviations."""
+    sse, coef, _ = evaluator.fit(accepted, G, family.free, rows)
+    r = int(np.argmin(sse))
+    if family.effect == "parameter_change":
+        return _refined_change(res, evaluator, accepted, family, r, rows)
+    n_rows = int(rows.sum()) if rows is not None else len(evaluator.nu)
+    sigma2 = max(float(sse[r]), 1e-300) / max(n_rows * evaluator.nu.shape[1], 1)
+    std: dict[str, float] = {}
+    if family.free:
+        _, _, _, per = evaluator._products(accepted, G[:, :, r:r + 1])
+        sums = {k: (v if rows is None else v[rows]).sum(axis=0) for k, v in per.items()}
+        GG = float(sums["GG"][0] - sums["BG"][:, 0] @ np.linalg.pinv(sums["BB"])
+                   @ sums["BG"][:, 0]) if sums["BB"].size else float(sums["GG"][0])
+        std[family.coefficient] = math.sqrt(sigma2 / max(GG, 1e-300))  # type: ignore[index]
     else:
-        value, std = _log_grid(cost, value)
-    refined = _with(effect, name, value, fitted)
-    if "forcing" in fitted.details:
-        fitted.details["forcing"] = fitted.details["forcing"] * refined.parameters["gain"]
-        refined = Effect(refined.effect, refined.target,
-                         {k: v for k, v in refined.parameters.items() if k != "gain"})
-    scale = value / effect.parameters[name] if name in LINEAR.values() \
-        and effect.parameters[name] and effect.effect not in ("input_gain",) else 1.0
-    out = Fitted(refined, fitted.contribution * scale, dict(fitted.std), fitted.n_parameters,
-                 fitted.multiplicity, fitted.details)
-    if name != "gain" and np.isfinite(std):
-        out.std[name] = std
-    return out
+        name = family.details["grid"]
+        values = np.array([m[name] for m in family.members])
+        value, std[name] = _parabola(values, sse, r, sigma2)
+        family = _with_member(family, r, {name: value})
+    return _fitted(res, family, r, float(coef[r]), G[:, :, r] * coef[r], std)
 
 
-def _with(effect: Effect, name: str, value: float, fitted: Fitted) -> Effect:
-    return Effect(effect.effect, effect.target, {**effect.parameters, name: value})
+def _fitted(res: Residuals, family: Family, r: int, coefficient: float, response: FloatArray,
+            std: dict[str, float]) -> Fitted:
+    effect = family.effect_for(r, coefficient)
+    details: dict[str, Any] = dict(family.details)
+    if family.effect == "sensor_bias":
+        contribution = bias_term(res, family.target, coefficient)[:-1]
+    else:
+        contribution = family.term(r, coefficient)[:-1]
+    if family.effect == "wave_frequency":
+        i = res.model.state_names.index(family.target)
+        details["forcing"] = family.w[:, i, r] * coefficient  # type: ignore[index]
+        effect = Effect(effect.effect, effect.target,
+                        {k: v for k, v in effect.parameters.items() if k != "gain"})
+        std.pop("gain", None)
+        std.update({"omega": details["resolution"] / 2, "zeta": effect.parameters["zeta"] / 2})
+    w = None if family.w is None else family.w[:, :, r] * coefficient
+    v = None if family.v is None else family.v[:, :, r] * coefficient
+    return Fitted(effect, contribution, response, family.free, w, v, std, family.n_parameters,
+                  len(family.members), details)
 
 
-def _gauss_newton(cost, value: float, iterations: int = 3) -> tuple[float, float]:
-    """Minimise a cost that is nearly quadratic in one parameter: Newton steps on a
-    three-point parabola; the std is the parameter change that raises the cost by one unit
-    of its per-start residual variance."""
-    step = max(abs(value) * 0.2, 1e-9)
-    for _ in range(iterations):
-        c0, cp, cm = cost(value), cost(value + step), cost(value - step)
-        curvature = (cp - 2 * c0 + cm) / step**2
-        if not (math.isfinite(curvature) and curvature > 0):
-            break
-        move = -(cp - cm) / (2 * step) / curvature
-        value += float(np.clip(move, -5 * step, 5 * step))
-        step = max(min(abs(move), step), abs(value) * 0.02, 1e-12)
-    c0, cp, cm = cost(value), cost(value + step), cost(value - step)
-    curvature = (cp - 2 * c0 + cm) / step**2
-    if not (math.isfinite(curvature) and curvature > 0):
-        return value, math.inf
-    return value, float(np.sqrt(2 / curvature))
+def _with_member(family: Family, r: int, parameters: dict[str, Any]) -> Family:
+    """The family with member ``r``'s parameters replaced (a refined grid value)."""
+    members = list(family.members)
+    members[r] = {**members[r], **parameters}
+    return Family(family.effect, family.target, members, family.w, family.v,
+                  family.coefficient, family.offset, family.n_parameters, family.details)
 
 
-def _log_grid(cost, value: float, span: float = 2.0, points: int = 9) -> tuple[float, float]:
-    """Minimise over a log-spaced grid around ``value`` (a positive parameter)."""
-    grid = value * np.geomspace(1 / span, span, points)
-    costs = np.array([cost(v) for v in grid])
-    k = int(np.argmin(costs))
-    best = float(grid[k])
-    if 0 < k < points - 1:
-        lg = np.log(grid[k - 1:k + 2])
-        a, b, _ = np.polyfit(lg, costs[k - 1:k + 2], 2)
+def _refined_change(res: Residuals, evaluator: Evaluator, accepted: list[Fitted],
+                    family: Family, r: int, rows: BoolArray | None) -> Fitted:
+    """A change time refined to one sample around the grid's best, its std from where the sum
+    of squares rises by one residual variance."""
+    times = family.details["times"]
+    spacing = float(times[1] - times[0]) if len(times) > 1 else res.dt * 10
+    best = family.members[r]
+    fine = np.arange(best["time"] - spacing, best["time"] + spacing + res.dt / 2, res.dt)
+    fine = fine[(fine > res.time[0]) & (fine < res.time[-1])]
+    local = next(f for f in change_families(res, times=fine, target=family.target)
+                 if f.members[0]["what"] == best["what"])
+    G = res.innovations.response(local.w, local.v)  # type: ignore[union-attr]
+    sse, coef, _ = evaluator.fit(accepted, G, True, rows)
+    k = int(np.argmin(sse))
+    n_rows = int(rows.sum()) if rows is not None else len(evaluator.nu)
+    sigma2 = max(float(sse[k]), 1e-300) / max(n_rows * evaluator.nu.shape[1], 1)
+    within = fine[sse <= sse[k] + sigma2 * 2]
+    std = {"time": float(max((within.max() - within.min()) / 2, res.dt)),
+           "c": float(abs(coef[k]) / math.sqrt(max((sse.max() - sse[k]) / sigma2, 1.0)))}
+    return _fitted(res, local, k, float(coef[k]), G[:, :, k] * coef[k], std)
+
+
+def _parabola(values: FloatArray, sse: FloatArray, r: int,
+              sigma2: float) -> tuple[float, float]:
+    """A grid parameter refined by a parabola through its neighbours' sums of squares (on the
+    grid's own ordering), its std where the parabola rises by one residual variance."""
+    order = np.argsort(values)
+    v, s = values[order], sse[order]
+    k = int(np.flatnonzero(order == r)[0])
+    if 0 < k < len(v) - 1:
+        a, b, _ = np.polyfit(v[k - 1:k + 2], s[k - 1:k + 2], 2)
         if a > 0:
-            best = float(np.exp(np.clip(-b / (2 * a), lg[0], lg[-1])))
-    return best, float(best * (np.log(span) / (points - 1)))
+            best = float(np.clip(-b / (2 * a), v[k - 1], v[k + 1]))
+            return best, float(math.sqrt(sigma2 / a))
+    return float(v[k]), float(abs(v[-1] - v[0]) / 2)
 
 
-def _rank_key(s: Scored) -> float:
-    # a significant improvement ranks by its size; extra parameters must pay for themselves
-    return s.improvement * (1 - 0.05 * (s.fitted.n_parameters - 1)) if s.t > 0 else -1.0
+def _gain_test(before: FloatArray, after: FloatArray, block: int) -> tuple[float, float]:
+    """One-sided test that the held-out correction ``D = before - after`` ``(T, m)`` predicts
+    the innovations ``before``: ``z = sum D.before / sqrt(sum_b (sum D.after)^2)`` over short
+    contiguous blocks ``b``. Under the null the innovations are noise independent of ``D``
+    (fitted on other folds), so ``z`` is standard normal; the blocks keep it so when the
+    whitened innovations are not perfectly white, and the self-normalisation when a few
+    excited stretches carry most of the evidence."""
+    correction = before - after
+    signal_ = np.sum(correction * before)
+    noise = np.sum(correction * after, axis=1)
+    blocks = np.add.reduceat(noise, np.arange(0, len(noise), max(block, 1)))
+    scale = math.sqrt(float(np.sum(blocks**2)))
+    z = float(signal_ / scale) if scale > 0 else 0.0
+    return z, float(stats.t.sf(z, max(len(blocks) - 1, 1)))  # few blocks: heavier tails
 
 
-def _confidences(scored: list[Scored], config: DiagnosisConfig) -> None:
-    """``(1 - p) *`` the hypothesis's Akaike-style weight among the significant ones; the
-    evidence is half the held-out log-ratio of error sums over the batches, so the weights
-    rank hypotheses as their improvements do."""
-    significant = [s for s in scored if s.p_value < 0.5 and s.improvement > 0]
+def _confidences(scored: list[Scored]) -> None:
+    """``(1 - p) *`` the family's Akaike weight among the significant ones (evidence: the
+    held-out log-likelihood gain)."""
+    significant = [s for s in scored if s.p_value < 0.5 and s.gain > 0]
     if not significant:
         return
-    evidence = np.array([config.batches / 2 * -math.log(max(1 - s.improvement, 1e-12))
-                         for s in significant])
+    evidence = np.array([s.gain for s in significant])
     weights = np.exp(evidence - evidence.max())
     weights /= weights.sum()
     for s, w in zip(significant, weights, strict=True):
         s.confidence = float((1 - s.p_value) * w)
 
 
-def _already(fitted: Fitted, findings: list[Scored]) -> bool:
-    return any(f.effect.effect == fitted.effect.effect and f.effect.target == fitted.effect.target
-               for f in findings)
-
-
-def _backfit(rollouts: Rollouts, selection: Selection, config: DiagnosisConfig,
+def _backfit(res: Residuals, evaluator: Evaluator, findings: list[Scored],
              rounds: int = 2) -> None:
-    """Refit each finding given the others, then score each alone and all together."""
-    findings = selection.findings
-    for _ in range(rounds if len(findings) > 1 else 0):
+    """Refit each finding given the others."""
+    for _ in range(rounds):
         for k, finding in enumerate(findings):
-            others = [f for j, f in enumerate(findings) if j != k]
-            refit = rollout_score(rollouts, others, refine(rollouts, others, finding.fitted),
-                                  config, selection.tried)
-            refit.confidence = finding.confidence
-            findings[k] = refit
-    for finding in findings:  # the improvement of each term alone
-        alone = rollout_score(rollouts, [], finding.fitted, config, selection.tried)
-        finding.alone = alone.improvement
-    selection.combined_improvement = rollouts.improvement(rollouts.errors([]),
-                                                          rollouts.errors(*_model(findings)))
+            others = [f.fitted for j, f in enumerate(findings) if j != k]
+            G = res.innovations.response(finding.family.w, finding.family.v)  # type: ignore
+            finding.fitted = fit_member(res, evaluator, others, finding.family, G)
+
+
+def fit_findings(res: Residuals, evaluator: Evaluator, findings: list[Scored],
+                 rows: BoolArray) -> list[Fitted]:
+    """The findings refitted jointly on ``rows`` only (for an honest validation on the rest)."""
+    fitted = [s.fitted for s in findings]
+    for _ in range(2 if len(findings) > 1 else 1):
+        for k, finding in enumerate(findings):
+            others = [f for j, f in enumerate(fitted) if j != k]
+            G = res.innovations.response(finding.family.w, finding.family.v)  # type: ignore
+            fitted[k] = fit_member(res, evaluator, others, finding.family, G, rows)
+    return fitted

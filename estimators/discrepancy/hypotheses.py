@@ -1,12 +1,12 @@
-"""Step 2: every catalogue entry as a hypothesis about the equation errors, fitted by least squares.
+"""Step 2: every catalogue entry as a family of candidate terms.
 
-Each hypothesis predicts a *contribution* ``C(theta)`` ``(T - 1, n)`` to the equation errors
-``e`` (state units per second): the term it adds, evaluated on the smoothed states. Terms linear in
-their coefficient (a current, a damping, a coupling, a sensor bias, an input gain) are solved in
-closed form; the others (a delay, a limit, a dead zone, a rate, a change time) on a grid of their
-one nonlinear parameter, with the coefficient concentrated out. Every fit uses the first part of
-the record only (``fit``), weighted per state equation by the inverse variance of its errors, so
-one number compares hypotheses that act on different equations.
+A :class:`Family` is one catalogue entry on one target, with the members among which the data
+must choose: the grid of delays of an input, the source state of a coupling, the product of an
+``unlisted`` term, the time of a parameter change. Each member is a term per unit coefficient,
+``w`` ``(T, n)`` added to the state derivatives or ``v`` ``(T, m)`` added to the measured
+channels, evaluated on the smoothed states. A *free* family fits the coefficient (a damping's
+``c``, a current's ``b``, a gain's ``k - 1``); a fixed one has it at 1 (a delay, a limit, a dead
+zone and a rate limit change the applied input exactly as they say).
 """
 
 from __future__ import annotations
@@ -25,253 +25,203 @@ from marine_envs.effects import Effect, applied_inputs
 from .residuals import Residuals, _output_matrix
 
 FloatArray = NDArray[np.float64]
+#: Parameter-change times tried: this many over the record (then refined on the final fit).
+CHANGE_TIMES = 60
+#: Narrow-band motion is looked for below this frequency, rad/s (sea waves and the slow modes
+#: they excite; above it a peak is far more likely a numerical artefact than physics).
+MAX_WAVE_FREQUENCY = 6.0
+#: Grid points of a delay (in samples up to 3 s), a limit, a dead zone or a rate limit.
+GRID_POINTS = 25
 
 
 @dataclass
-class Fitted:
-    """A fitted hypothesis: the effect with its parameters, their standard deviations and its
-    contribution to the equation errors over the whole record."""
+class Family:
+    """Candidate terms of one effect on one target.
 
-    effect: Effect
-    contribution: FloatArray
-    std: dict[str, float] = field(default_factory=dict)
+    :param members: the parameters that tell the members apart (``{"tau": 0.4}``, ...).
+    :param w: ``(T, n, R)`` state-derivative terms per unit coefficient, or None.
+    :param v: ``(T, m, R)`` channel offsets per unit coefficient, or None.
+    :param coefficient: name of the fitted parameter (None: fixed at 1).
+    :param offset: the parameter is ``offset + coefficient`` (an input gain: ``1 + a``).
+    :param n_parameters: parameters a member has (penalised in the ranking).
+    """
+
+    effect: str
+    target: str
+    members: list[dict[str, Any]]
+    w: FloatArray | None = None
+    v: FloatArray | None = None
+    coefficient: str | None = "c"
+    offset: float = 0.0
     n_parameters: int = 1
-    multiplicity: int = 1  # how many tries the search made for this one (a grid, a library)
     details: dict[str, Any] = field(default_factory=dict)
 
-
-@dataclass
-class Problem:
-    """What every hypothesis is fitted to: the residuals, the current equation errors (minus the
-    findings already accepted), the fit rows and the per-equation weights."""
-
-    residuals: Residuals
-    error: FloatArray
-    fit: NDArray[np.bool_]
-    weights: FloatArray
-    inflation: FloatArray  # per equation, sqrt of the variance inflation of autocorrelation
-
-    @classmethod
-    def build(cls, residuals: Residuals, error: FloatArray, fit_fraction: float) -> Problem:
-        fit = np.arange(len(error)) < int(fit_fraction * len(error))
-        variance = np.var(error[fit], axis=0)
-        # unmeasured states follow the model (see residuals.FOLLOW_MODEL): their errors are ~0
-        measured = np.array([n in residuals.channels for n in residuals.model.state_names])
-        usable = residuals.observable & measured & (variance > 0)
-        weights = np.where(usable, 1 / np.where(variance > 0, variance, 1.0), 0.0)
-        e = error[fit]
-        rho = np.clip(np.sum(e[1:] * e[:-1], axis=0) / np.maximum(np.sum(e * e, axis=0), 1e-300),
-                      0.0, 0.98)
-        return cls(residuals, error, fit, weights, np.sqrt((1 + rho) / (1 - rho)))
+    @property
+    def free(self) -> bool:
+        return self.coefficient is not None
 
     @property
-    def model(self):
-        return self.residuals.model
+    def key(self) -> tuple[str, str]:
+        return self.effect, self.target
 
-    def sse(self, contribution: FloatArray, rows: NDArray[np.bool_] | None = None) -> float:
-        rows = self.fit if rows is None else rows
-        r = self.error[rows] - contribution[rows]
-        return float(np.sum(r * r * self.weights))
+    def effect_for(self, member: int, coefficient: float = 1.0) -> Effect:
+        """The catalogue effect of one member with its coefficient."""
+        parameters = dict(self.members[member])
+        if self.coefficient is not None:
+            parameters[self.coefficient] = self.offset + coefficient
+        return Effect(self.effect, self.target, parameters)
 
-
-# -- the hypotheses ------------------------------------------------------------------------------
-def all_hypotheses(problem: Problem) -> Iterator[Fitted]:
-    """Every hypothesis the catalogue allows for this model and these channels, fitted."""
-    yield from state_terms(problem)
-    yield from parameter_changes(problem)
-    yield from input_effects(problem)
-    yield from sensor_biases(problem)
-    yield from wave_frequencies(problem)
-    yield from unlisted_terms(problem)
+    def term(self, member: int, coefficient: float = 1.0) -> FloatArray:
+        """The state-derivative term ``(T, n)`` of one member (zeros for a channel offset)."""
+        if self.w is None:
+            return np.zeros((self.v.shape[0], 0))  # type: ignore[union-attr]
+        return self.w[:, :, member] * coefficient
 
 
-def _targets(problem: Problem) -> list[int]:
-    return [i for i in range(len(problem.model.state_names)) if problem.weights[i] > 0]
+def all_families(res: Residuals) -> Iterator[Family]:
+    """Every family the catalogue allows for this model and these channels."""
+    yield from state_families(res)
+    yield from change_families(res)
+    yield from input_families(res)
+    yield from bias_families(res)
+    yield from wave_families(res)
+    yield from unlisted_families(res)
 
 
-def _single_row(problem: Problem, effect: str, i: int, regressor: FloatArray,
-                parameters: dict[str, Any], name: str = "c") -> Fitted | None:
-    """Fit ``c * regressor`` in equation ``i``."""
-    fit = problem.fit
-    phi, e = regressor[fit], problem.error[fit, i]
-    den = float(phi @ phi)
-    if den <= 1e-300 * len(phi) or np.ptp(regressor) == 0 and effect != "current":
-        return None
-    c = float(phi @ e) / den
-    sigma = np.sqrt(np.mean((e - c * phi) ** 2)) * problem.inflation[i]
-    contribution = np.zeros_like(problem.error)
-    contribution[:, i] = c * regressor
-    target = problem.model.state_names[i]
-    return Fitted(Effect(effect, target, {**parameters, name: c}), contribution,
-                  {name: float(sigma / np.sqrt(den))})
-
-
-def state_terms(problem: Problem) -> Iterator[Fitted]:
-    """Current, linear/quadratic/cubic damping, coupling and cubic restoring terms."""
-    x, names = problem.residuals.midpoint, problem.model.state_names
-    for i in _targets(problem):
-        xi = x[:, i]
-        terms = [("current", np.ones_like(xi), {}),
-                 ("linear_damping", xi, {}),
-                 ("quadratic_damping", xi * np.abs(xi), {}),
-                 ("nonlinear_damping", xi**3, {"form": "cubic"})]
-        for s, source in enumerate(names):
-            if s != i and problem.residuals.observable[s]:
-                terms.append(("coupling", x[:, s], {"source": source}))
-                terms.append(("nonlinear_restoring", x[:, s] ** 3, {"source": source}))
-        for effect, regressor, fixed in terms:
-            fitted = _single_row(problem, effect, i, regressor, fixed,
-                                 "b" if effect == "current" else "c")
-            if fitted is not None:
-                yield fitted
-
-
-def parameter_changes(problem: Problem, margin: float = 0.05) -> Iterator[Fitted]:
-    """A step change at an unknown time of the damping (``c * x_t``) or of a constant force in
-    one equation: every change time on the fit rows by cumulative sums."""
-    x, time = problem.residuals.midpoint, problem.residuals.time[:-1]
-    n_fit = int(problem.fit.sum())
-    lo, hi = int(margin * len(time)), n_fit - int(margin * len(time))
-    if hi <= lo + 2:
-        return
-    for i in _targets(problem):
-        e = problem.error[:n_fit, i]
-        for what, regressor in (("damping", x[:, i]), ("force", np.ones(len(x)))):
-            phi = regressor[:n_fit]
-            num = np.cumsum((phi * e)[::-1])[::-1]
-            den = np.cumsum((phi * phi)[::-1])[::-1]
-            gain = np.where(den > 0, num**2 / np.maximum(den, 1e-300), 0.0)
-            k = lo + int(np.argmax(gain[lo:hi]))
-            step = (np.arange(len(x)) >= k).astype(float)
-            fitted = _single_row(problem, "parameter_change", i, step * regressor,
-                                 {"time": float(time[k]), "what": what})
-            if fitted is None:
-                continue
-            fitted.std["time"] = _change_time_std(gain, k, problem.residuals.dt)
-            fitted.n_parameters, fitted.multiplicity = 2, 10
-            yield fitted
-
-
-def _change_time_std(gain: FloatArray, k: int, dt: float) -> float:
-    """Half the width (s) over which the explained sum of squares stays within one unit of
-    chi-square of its best (a likelihood interval for the change time)."""
-    if gain[k] <= 0:
-        return float("inf")
-    within = np.flatnonzero(gain >= gain[k] * (1 - 1 / max(gain[k], 1.0)))
-    return float((within.max() - within.min() + 1) * dt / 2)
-
-
-def input_effects(problem: Problem) -> Iterator[Fitted]:
-    """Gain (closed form), delay, saturation, dead zone and rate limit (grids) of each input."""
-    res = problem.residuals
-    model, u, dt = problem.model, res.u, res.dt
+# -- state terms ----------------------------------------------------------------------------------
+def _states(res: Residuals) -> FloatArray:
+    """The smoothed states at the middle of each step ``(T, n)`` (the last one repeated)."""
     x = res.midpoint
-    base = model.rhs(x, u[:-1])
+    return np.vstack([x, x[-1:]])
 
-    def contribution(effect: Effect) -> FloatArray:
-        return model.rhs(x, applied_inputs(effect, model, u, dt)[:-1]) - base
+
+def _targets(res: Residuals) -> list[int]:
+    return [i for i in range(len(res.model.state_names)) if res.observable[i]]
+
+
+def _in_equation(i: int, columns: FloatArray, n: int) -> FloatArray:
+    """``(T, R)`` regressors placed in equation ``i``: ``(T, n, R)``."""
+    w = np.zeros((columns.shape[0], n, columns.shape[1]))
+    w[:, i, :] = columns
+    return w
+
+
+def state_families(res: Residuals) -> Iterator[Family]:
+    """Current, linear/quadratic/cubic damping, coupling and cubic restoring terms."""
+    x, names = _states(res), res.model.state_names
+    n = len(names)
+    for i in _targets(res):
+        xi = x[:, i]
+        singles = [("current", np.ones_like(xi), {}, "b"),
+                   ("linear_damping", xi, {}, "c"),
+                   ("quadratic_damping", xi * np.abs(xi), {}, "c"),
+                   ("nonlinear_damping", xi**3, {"form": "cubic"}, "c")]
+        for effect, column, fixed, name in singles:
+            if effect == "current" or np.ptp(column) > 0:
+                yield Family(effect, names[i], [fixed], _in_equation(i, column[:, None], n),
+                             coefficient=name)
+        sources = [s for s in _targets(res) if s != i and np.ptp(x[:, s]) > 0]
+        for effect, power in (("coupling", 1), ("nonlinear_restoring", 3)):
+            if sources:
+                columns = np.column_stack([x[:, s] ** power for s in sources])
+                yield Family(effect, names[i], [{"source": names[s]} for s in sources],
+                             _in_equation(i, columns, n), n_parameters=2)
+
+
+def change_families(res: Residuals, margin: float = 0.05, times: FloatArray | None = None,
+                    target: str | None = None) -> Iterator[Family]:
+    """A step change, at one of ``times`` (default: ``CHANGE_TIMES`` over the record but its
+    ends), of the damping (``c * x_t``) or of a constant force in one equation (``target``'s,
+    default: every observable state's)."""
+    x, t = _states(res), res.time
+    n = len(res.model.state_names)
+    if times is None:
+        span = t[-1] - t[0]
+        times = np.linspace(t[0] + margin * span, t[-1] - margin * span, CHANGE_TIMES)
+    after = (t[:, None] >= times[None, :]).astype(float)
+    for i in _targets(res):
+        if target is not None and res.model.state_names[i] != target:
+            continue
+        for what, regressor in (("damping", x[:, i]), ("force", np.ones(len(t)))):
+            yield Family("parameter_change", res.model.state_names[i],
+                         [{"time": float(s), "what": what} for s in times],
+                         _in_equation(i, after * regressor[:, None], n), n_parameters=2,
+                         details={"times": times})
+
+
+# -- inputs ---------------------------------------------------------------------------------------
+def input_families(res: Residuals) -> Iterator[Family]:
+    """Gain (free), and delay, saturation, dead zone and rate limit (grids) of each input."""
+    model, u, dt = res.model, res.u, res.dt
+    x = _states(res)
+    base = model.rhs(x, u)
+
+    def terms(effects: list[Effect]) -> FloatArray:
+        return np.stack([model.rhs(x, applied_inputs(e, model, u, dt)) - base for e in effects],
+                        axis=-1)
 
     for j, name in enumerate(model.input_names):
         c = u[:, j] - model.u0[j]
-        spread = float(np.std(c))
-        if spread <= 0:
+        if np.std(c) <= 0:
             continue
-        unit = contribution(Effect("input_gain", name, {"k": 2.0}))
-        fitted = _scaled(problem, unit, Effect("input_gain", name, {"k": 1.0}), "k", offset=1.0)
-        if fitted is not None:
-            yield fitted
-        magnitude = np.abs(c)
-        rates = np.abs(np.diff(c)) / dt
+        yield Family("input_gain", name, [{}], terms([Effect("input_gain", name, {"k": 2.0})]),
+                     coefficient="k", offset=1.0)
+        magnitude, rates = np.abs(c), np.abs(np.diff(c)) / dt
+        levels = np.linspace(0.5, 0.995, GRID_POINTS)
         grids = {
-            "input_delay": ("tau", dt * np.arange(1, max(2, int(3.0 / dt)) + 1)),
-            "input_saturation": ("limit", np.quantile(magnitude, np.linspace(0.5, 0.995, 25))),
-            "input_deadzone": ("width", np.quantile(magnitude, np.linspace(0.02, 0.6, 25))),
-            "input_rate_limit": ("rate", np.quantile(rates[rates > 0], np.linspace(0.5, 0.995, 25))
+            "input_delay": ("tau", dt * np.arange(1, max(2, int(round(3.0 / dt))) + 1)),
+            "input_saturation": ("limit", np.quantile(magnitude, levels)),
+            "input_deadzone": ("width", np.quantile(magnitude, np.linspace(0.02, 0.6,
+                                                                            GRID_POINTS))),
+            "input_rate_limit": ("rate", np.quantile(rates[rates > 0], levels)
                                  if np.any(rates > 0) else np.array([])),
         }
         for effect, (parameter, grid) in grids.items():
             grid = np.unique(grid[grid > 0])
             if grid.size:
-                fitted = _grid(problem, [Effect(effect, name, {parameter: float(g)})
-                                         for g in grid], contribution, parameter)
-                if fitted is not None:
-                    yield fitted
+                effects = [Effect(effect, name, {parameter: float(g)}) for g in grid]
+                yield Family(effect, name, [dict(e.parameters) for e in effects],
+                             terms(effects), coefficient=None, details={"grid": parameter})
 
 
-def _scaled(problem: Problem, unit: FloatArray, effect: Effect, name: str,
-            offset: float = 0.0) -> Fitted | None:
-    """Fit ``a * unit`` over every equation; the parameter is ``offset + a``."""
-    w, fit = problem.weights, problem.fit
-    den = float(np.sum(unit[fit] ** 2 * w))
-    if den <= 0:
-        return None
-    a = float(np.sum(unit[fit] * problem.error[fit] * w)) / den
-    inflation = float(np.max(problem.inflation[w > 0])) if np.any(w > 0) else 1.0
-    parameters = {**effect.parameters, name: offset + a}
-    sigma = np.sqrt(max(problem.sse(a * unit), 0.0) / max(int(fit.sum()) * int((w > 0).sum()), 1))
-    return Fitted(Effect(effect.effect, effect.target, parameters), a * unit,
-                  {name: float(inflation * sigma / np.sqrt(den))})
-
-
-def _grid(problem: Problem, effects: list[Effect], contribution, parameter: str) -> Fitted | None:
-    """The best of a grid of one-parameter effects, its std from the curvature of the SSE."""
-    contributions = [contribution(e) for e in effects]
-    sse = np.array([problem.sse(c) for c in contributions])
-    k = int(np.argmin(sse))
-    values = np.array([e.parameters[parameter] for e in effects])
-    std = _curvature_std(values, sse, k, problem)
-    return Fitted(effects[k], contributions[k], {parameter: std}, multiplicity=len(effects))
-
-
-def _curvature_std(values: FloatArray, sse: FloatArray, k: int, problem: Problem) -> float:
-    """Standard deviation of a grid parameter from a parabola through the SSE around its
-    minimum (SSE in units of the weighted residual variance, inflated for autocorrelation)."""
-    if k == 0 or k == len(values) - 1:
-        return float(abs(values[-1] - values[0]))
-    a, _, _ = np.polyfit(values[k - 1:k + 2], sse[k - 1:k + 2], 2)
-    n = int(problem.fit.sum()) * max(int((problem.weights > 0).sum()), 1)
-    scale = sse[k] / n * float(np.max(problem.inflation)) ** 2
-    return float(np.sqrt(scale / a)) if a > 0 else float(abs(values[-1] - values[0]))
-
-
-def sensor_biases(problem: Problem) -> Iterator[Fitted]:
-    """A constant offset on a measured channel: the smoothed state is shifted by it, so the
-    equations see ``f(x - b dx/dy) - f(x)``."""
-    res = problem.residuals
-    model, x, u = problem.model, res.midpoint, res.u[:-1]
-    C = _output_matrix(model, res.channels)
-    base = model.rhs(x, u)
+# -- sensors --------------------------------------------------------------------------------------
+def bias_families(res: Residuals) -> Iterator[Family]:
+    """A constant offset on each measured channel."""
+    T, m = len(res.time), len(res.channels)
     for j, channel in enumerate(res.channels):
-        direction = np.linalg.pinv(C)[:, j]
-        if not np.any(direction):
+        v = np.zeros((T, m, 1))
+        v[:, j, 0] = 1.0
+        yield Family("sensor_bias", channel, [{}], v=v, coefficient="b")
+
+
+def bias_term(res: Residuals, channel: str, b: float) -> FloatArray:
+    """What a bias ``b`` on ``channel`` does to the nominal equations evaluated on the smoothed
+    states (which followed the biased channel): ``f(x - b dx/dy) - f(x)`` ``(T, n)``."""
+    x, u = _states(res), res.u
+    direction = np.linalg.pinv(_output_matrix(res.model, res.channels))[:, res.channels.index(
+        channel)]
+    return res.model.rhs(x - b * direction, u) - res.model.rhs(x, u)
+
+
+# -- narrow-band motion ---------------------------------------------------------------------------
+def wave_families(res: Residuals, alpha: float = 1e-4, max_zeta: float = 0.1) -> Iterator[Family]:
+    """A narrow-band process in one measured state's equation: a significant, narrow peak of
+    its equation-error spectrum over a smooth background; the term is the error band-passed
+    about the peak (its coefficient is fitted)."""
+    n = len(res.model.state_names)
+    for i in _targets(res):
+        if res.model.state_names[i] not in res.channels:
             continue
-        step = 0.1 * float(np.std(res.y[:, j])) + 1e-12
-        unit = (model.rhs(x - step * direction, u) - base) / step
-        if np.sum(unit[problem.fit] ** 2 * problem.weights) <= 1e-12 * np.sum(problem.weights):
-            continue  # a channel nothing depends on (a heading): a bias there is invisible
-        fitted = _scaled(problem, unit, Effect("sensor_bias", channel, {"b": 0.0}), "b")
-        if fitted is not None:
-            yield fitted
-
-
-def wave_frequencies(problem: Problem, alpha: float = 1e-3,
-                     max_zeta: float = 0.25) -> Iterator[Fitted]:
-    """A narrow-band process in one equation: a significant, narrow (``zeta <= max_zeta``) peak
-    of its error spectrum over a smooth background; the contribution is the band's excess,
-    band-pass filtered."""
-    dt = problem.residuals.dt
-    for i in _targets(problem):
-        peak = spectral_peak(problem.error[problem.fit, i], dt)
+        error = res.error[:, i]
+        peak = spectral_peak(error, res.dt)
         if peak is None or peak["p_value"] > alpha or peak["zeta"] > max_zeta:
             continue
-        omega, zeta = peak["omega"], peak["zeta"]
-        band = _band_pass(problem.error[:, i], omega, max(zeta, peak["resolution"]), dt)
-        contribution = np.zeros_like(problem.error)
-        contribution[:, i] = band * (1 - 1 / peak["ratio"])
-        target = problem.model.state_names[i]
-        yield Fitted(Effect("wave_frequency", target, {"omega": omega, "zeta": zeta}),
-                     contribution, {"omega": peak["resolution"] / 2, "zeta": zeta / 2},
-                     n_parameters=2, multiplicity=1, details=peak)
+        band = _band_pass(error, peak["omega"], max(peak["zeta"], peak["resolution"]), res.dt)
+        column = np.append(band, band[-1])
+        yield Family("wave_frequency", res.model.state_names[i],
+                     [{"omega": peak["omega"], "zeta": peak["zeta"]}],
+                     _in_equation(i, column[:, None], n), coefficient="gain", n_parameters=2,
+                     details=peak)
 
 
 def spectral_peak(x: FloatArray, dt: float, segment: float = 60.0) -> dict[str, float] | None:
@@ -283,7 +233,7 @@ def spectral_peak(x: FloatArray, dt: float, segment: float = 60.0) -> dict[str, 
         return None
     f, psd = signal.welch(x, fs=1 / dt, nperseg=nperseg)
     omega = 2 * np.pi * f
-    usable = (omega > 0.15) & (omega < 0.8 * np.pi / dt)
+    usable = (omega > 0.15) & (omega < min(0.8 * np.pi / dt, MAX_WAVE_FREQUENCY))
     if usable.sum() < 10:
         return None
     background = np.exp(signal.medfilt(np.log(psd + 1e-300), 2 * (len(psd) // 16) + 1))
@@ -318,29 +268,22 @@ def _band_pass(x: FloatArray, omega: float, zeta: float, dt: float) -> FloatArra
     return signal.sosfiltfilt(sos, x)
 
 
-def unlisted_terms(problem: Problem) -> Iterator[Fitted]:
-    """A sparse regression over a library of products the catalogue does not name (``x_a *
-    x_b``, ``x_a * u_j``, ``x_a**2``, ``u_j**2``): per equation, the single best term."""
-    res, model = problem.residuals, problem.model
-    observable = [i for i in range(len(model.state_names)) if res.observable[i]]
-    variables = [(model.state_names[i], res.midpoint[:, i]) for i in observable]
-    variables += [(n, res.u[:-1, j]) for j, n in enumerate(model.input_names)
+# -- anything else --------------------------------------------------------------------------------
+def unlisted_families(res: Residuals) -> Iterator[Family]:
+    """A library of products the catalogue does not name (``x_a * x_b``, ``x_a * u_j``,
+    ``x_a**2``, ``u_j**2``), each as a member, in each equation: the sparse regression's one
+    term, chosen on the training data."""
+    model, x = res.model, _states(res)
+    variables = [(model.state_names[i], x[:, i]) for i in _targets(res)]
+    variables += [(n, res.u[:, j]) for j, n in enumerate(model.input_names)
                   if np.ptp(res.u[:, j]) > 0]
     library = [(f"{a}*{b}", va * vb)
                for (a, va), (b, vb) in itertools.combinations_with_replacement(variables, 2)]
+    library = [(name, column) for name, column in library if np.ptp(column) > 0]
     if not library:
         return
-    names = [name for name, _ in library]
-    theta = np.column_stack([column for _, column in library])
-    fit = problem.fit
-    theta_fit = theta[fit]
-    norms = np.sum(theta_fit**2, axis=0)
-    valid = norms > 0
-    for i in _targets(problem):
-        gain = np.where(valid, (theta_fit.T @ problem.error[fit, i]) ** 2
-                        / np.maximum(norms, 1e-300), -1.0)
-        k = int(np.argmax(gain))
-        fitted = _single_row(problem, "unlisted", i, theta[:, k], {"expression": names[k]})
-        if fitted is not None:
-            fitted.multiplicity = len(library)
-            yield fitted
+    columns = np.column_stack([column for _, column in library])
+    for i in _targets(res):
+        yield Family("unlisted", model.state_names[i],
+                     [{"expression": name} for name, _ in library],
+                     _in_equation(i, columns, len(model.state_names)), n_parameters=2)

@@ -28,8 +28,7 @@ from scipy import signal
 
 from marine_envs.effects import Effect, applied_inputs, state_term
 
-from .api import Diagnosis, Finding
-from .diagnosis import Scored
+from .api import Diagnosis, Finding, findings_model
 from .residuals import Residuals
 
 FloatArray = NDArray[np.float64]
@@ -227,17 +226,10 @@ def _after_error(diagnosis: Diagnosis) -> FloatArray | None:
     ro, selection = diagnosis.rollouts, diagnosis.selection
     if ro is None or selection is None or not selection.findings:
         return None
-    effects, forcing = findings_model(selection.findings)
-    return (ro.target - ro.predict(effects, forcing))[:, -1, :]
-
-
-def findings_model(findings: Sequence[Scored]) -> tuple[list[Effect], dict[int, FloatArray]]:
-    """The findings' effects and the wave forcings ``{index: (T,)}`` :meth:`Rollouts.predict`
-    takes (the same as the validation's)."""
-    effects = [s.fitted.effect for s in findings]
-    forcing = {k: s.fitted.details["forcing"] for k, s in enumerate(findings)
-               if "forcing" in s.fitted.details}
-    return effects, forcing
+    assert diagnosis.residuals is not None
+    effects, forcing, shift = findings_model(diagnosis.residuals,
+                                             [s.fitted for s in selection.findings])
+    return (ro.target - ro.predict(effects, forcing, shift))[:, -1, :]
 
 
 def _shade_windows(ax: Any, windows: Sequence[dict[str, Any]]) -> None:

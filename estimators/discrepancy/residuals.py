@@ -25,6 +25,7 @@ from marine_envs.models import VehicleModel
 from marine_envs.recording import Recording
 
 from ..ekf import ExtendedKalmanFilter
+from .innovations import Innovations
 
 FloatArray = NDArray[np.float64]
 #: Channels that are angles: unwrapped before smoothing.
@@ -45,6 +46,7 @@ class Residuals:
     :param error: equation errors ``(T - 1, n)``, state units per second.
     :param noise: white-noise standard deviation of each channel, estimated from the data.
     :param observable: per state, whether the measured channels see it.
+    :param innovations: the last pass's filter innovations and their sensitivities.
     """
 
     model: VehicleModel
@@ -59,6 +61,7 @@ class Residuals:
     noise: FloatArray
     observable: NDArray[np.bool_]
     substeps: int = 1
+    innovations: Innovations | None = None
 
     @property
     def midpoint(self) -> FloatArray:
@@ -160,7 +163,8 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
         Q = np.diag(np.where(measured, np.maximum(np.var(error, axis=0), 1e-12 * (
             np.var(x, axis=0) + 1e-12)), np.diag(Q) / dt**2 * FOLLOW_MODEL) * dt**2)
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
-                     error, noise, observable_states(model, channels), substeps)
+                     error, noise, observable_states(model, channels), substeps,
+                     Innovations.from_filter(ekf, smoothed.filtered, dt))
 
 
 def _initial_state(model: VehicleModel, y: FloatArray, channels: tuple[str, ...],

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from marine_envs.effects import Effect, EffectModel, rk4
 
-from .residuals import Residuals, _output_matrix
+from .residuals import Residuals
 
 FloatArray = NDArray[np.float64]
 
@@ -31,7 +31,7 @@ class Rollouts:
 
     def __init__(self, residuals: Residuals, fit_fraction: float, horizon: float = 3.0,
                  stride: float = 0.5) -> None:
-        self.res = residuals
+        self.res, self.fit_fraction = residuals, fit_fraction
         dt, T = residuals.dt, len(residuals.time)
         self.steps = max(2, int(round(horizon / dt)))
         starts = np.arange(0, T - self.steps - 1, max(1, int(round(stride / dt))))
@@ -43,7 +43,6 @@ class Rollouts:
         self.channel_index = [model.output_names.index(c) for c in residuals.channels]
         self._outputs_are_states = model.output_names == model.state_names
         self.target = residuals.y[starts[:, None] + np.arange(1, self.steps + 1)]  # (S, H, m)
-        self.bias_direction = np.linalg.pinv(_output_matrix(model, residuals.channels))
         nominal = self.predict([])
         self.weights = 1 / np.maximum(np.var((self.target - nominal)[self.fit], axis=(0, 1)),
                                       1e-300)
@@ -52,16 +51,21 @@ class Rollouts:
         self.noise_floor = self.steps * float(np.sum(self.weights * residuals.noise**2))
 
     def predict(self, effects: Sequence[Effect],
-                forcing: Mapping[int, FloatArray] | None = None) -> FloatArray:
+                forcing: Mapping[int, FloatArray] | None = None,
+                shift: FloatArray | None = None) -> FloatArray:
         """Predicted channels ``(S, H, m)`` of the model with ``effects``; ``forcing`` maps the
-        index of a ``wave_frequency`` effect to its process ``(T,)`` (equation units)."""
+        index of a ``wave_frequency`` effect to its process ``(T,)`` (equation units);
+        ``shift`` ``(T, n)`` moves the smoothed states to where the smoother of the model with
+        the effects would have put them (the nominal smoother bent them to fit the data)."""
+        with np.errstate(over="ignore", invalid="ignore"):  # a wild trial value may overflow
+            return self._predict(effects, forcing, shift)
+
+    def _predict(self, effects: Sequence[Effect], forcing: Mapping[int, FloatArray] | None,
+                 shift: FloatArray | None) -> FloatArray:
         res, model = self.res, self.res.model
         truth = EffectModel(model, effects)
         u = truth.applied_inputs(res.u, res.dt)
-        x = res.x[self.starts].copy()
-        for effect in truth.output_effects:  # the smoother followed the biased channel
-            x -= effect.parameters["b"] * self.bias_direction[:, res.channels.index(
-                effect.target)]
+        x = res.x[self.starts] + (0.0 if shift is None else shift[self.starts])
         out = np.empty((len(self.starts), self.steps, len(res.channels)))
         h = res.dt / res.substeps
         for j in range(self.steps):
@@ -78,11 +82,12 @@ class Rollouts:
         return np.nan_to_num(out, nan=1e6, posinf=1e6, neginf=-1e6)
 
     def errors(self, effects: Sequence[Effect],
-               forcing: Mapping[int, FloatArray] | None = None) -> FloatArray:
+               forcing: Mapping[int, FloatArray] | None = None,
+               shift: FloatArray | None = None) -> FloatArray:
         """Weighted squared prediction error per start ``(S,)``."""
         with np.errstate(over="ignore", invalid="ignore"):  # a wild trial value may overflow
-            r = self.target - self.predict(effects, forcing)
-        return np.minimum(np.sum(r * r * self.weights, axis=(1, 2)), 1e30)
+            r = self.target - self.predict(effects, forcing, shift)
+            return np.minimum(np.sum(r * r * self.weights, axis=(1, 2)), 1e30)
 
     def improvement(self, before: FloatArray, after: FloatArray) -> float:
         """The share of the held-out error in excess of the sensor noise that ``after`` removes
@@ -90,12 +95,12 @@ class Rollouts:
         floor = self.noise_floor * int(self.held.sum())
         b, a = float(before[self.held].sum()), float(after[self.held].sum())
         excess = max(b - floor, 0.05 * b)
-        return (b - a) / excess if excess > 0 else 0.0
+        return min((b - a) / excess, 1.0) if excess > 0 else 0.0
 
     def rmse(self, effects: Sequence[Effect], forcing: Mapping[int, FloatArray] | None = None,
-             held: bool = True) -> dict[str, float]:
+             shift: FloatArray | None = None, held: bool = True) -> dict[str, float]:
         """Root-mean-square prediction error per channel over the held-out (or fit) starts."""
         rows = self.held if held else self.fit
-        r = (self.target - self.predict(effects, forcing))[rows]
+        r = (self.target - self.predict(effects, forcing, shift))[rows]
         return {c: float(np.sqrt(np.mean(r[..., j] ** 2)))
                 for j, c in enumerate(self.res.channels)}

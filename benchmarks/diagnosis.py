@@ -1,0 +1,383 @@
+"""Mismatch diagnosis on its seeded acceptance set, against plain SINDy on the residuals, and
+the time one diagnosis takes on one core.
+
+1. Accuracy. :func:`marine_envs.diagnosis_cases.catalogue_cases`: for the USV and the hydrofoil,
+   every one of the 15 catalogue effects (sized by ``typical_effect`` at strength 0.3), two
+   two-effect combinations per vehicle and effect-free records, at sensor noise 5 % and 10 % of
+   each channel's spread and two seeds; 300 s closed-loop records at 10 Hz. Each is diagnosed
+   against its nominal model and scored: the per-case table, the confusion table (Markdown)
+   and the four acceptance rates against their targets:
+
+   - ranked right (the true effect and target ranked first; both of a pair in the first two):
+     at least 90 % of the cases with effects;
+   - the matched finding's key parameter within 30 % of the truth (a change's time within 10 s):
+     at least 90 % of the matched findings;
+   - held-out improvement of the combined findings >= 30 %: at least 90 % of the cases with
+     effects;
+   - no finding of confidence >= 0.5 on an effect-free record: at least 95 % of them.
+
+2. Baseline: plain SINDy on the residuals (pysindy; ``pip install -e ".[bench]"``) on the same
+   records with effects. The measured channels (all states but the USV's sway speed ``v``, held
+   at its nominal value) are smoothed and differentiated with pysindy's smoothed finite
+   difference (Savitzky-Golay, 11 samples); the residual ``x_dot - model.rhs(x, u)`` of each
+   measured state is regressed by ``SINDy(optimizer=STLSQ(threshold),
+   feature_library=PolynomialLibrary(degree=3))`` on the measured states with the inputs as
+   control. So that one threshold serves every channel and vehicle, states and inputs are
+   divided by their root-mean-square (not centred, so a monomial keeps its meaning) and each
+   residual by the spread of its state's derivative. The answer is the term with the largest
+   ``|coefficient| x RMS(term)`` (RMS, not std: a constant term has none) over all equations,
+   named by :func:`~marine_envs.diagnosis_cases.sindy_term_to_effect`; for a pair, the two best
+   distinct answers. Threshold 0.1: a sweep over 0.01-0.5 (both vehicles, seed 0, 5 %, 10 % and
+   20 % noise, single effects; ``--sindy-thresholds``) ranked no case right at any threshold, so
+   the middle value is kept. Without any effect and without noise the residual is already 1.4-13
+   times the spread of the derivative it belongs to (USV: the unmeasured sway speed held at zero;
+   hydrofoil: the stiff heave-pitch model evaluated on smoothed 10 Hz states, and the sea), while
+   an effect is sized at 0.3 of it. Its ranked-right rate is reported next to the diagnosis's on
+   the same cases, per noise level (``--with-20`` adds 20 % noise for both).
+
+3. Timing: a 10-minute record at 10 Hz of the USV with quadratic damping on r at 10 % noise,
+   diagnosed in this process pinned to one CPU with one BLAS thread (target: 30 s); as a
+   same-run reference, one call of the nominal EKF + RTS smoother that starts every diagnosis
+   (``estimators.discrepancy.residuals.estimate``) on the same record, and the ratio.
+
+Exit code 1 when an acceptance rate or the time target is missed. Run time on 2 cores: about
+5 min with ``--quick --vehicles usv`` (32 cases, ~14 s each), about 20 min in full (148 cases).
+
+    python benchmarks/diagnosis.py [--quick] [--vehicles usv,hydrofoil] [--noise 0.05,0.10]
+                                   [--seeds 0,1] [--jobs N] [--with-20] [--json out.json]
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # _common, also under pytest
+
+import argparse  # noqa: E402
+import dataclasses  # noqa: E402
+import json  # noqa: E402
+import time  # noqa: E402
+import warnings  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
+from contextlib import nullcontext  # noqa: E402
+from types import ModuleType  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+from _common import pin_to_one_cpu  # noqa: E402
+from numpy.typing import NDArray  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+from marine_envs.diagnosis_cases import (  # noqa: E402
+    Case,
+    Outcome,
+    catalogue_cases,
+    confusion,
+    run_case,
+    sindy_term_to_effect,
+    summarize,
+    term_factors,
+)
+from marine_envs.models import VehicleModel, get_model  # noqa: E402
+from marine_envs.recording import Recording  # noqa: E402
+from marine_envs.synthetic import synthesize, typical_effect  # noqa: E402
+
+FloatArray = NDArray[np.float64]
+#: STLSQ threshold of the SINDy baseline (on the scaled problem, see the module docstring).
+SINDY_THRESHOLD = 0.1
+#: Channels that are angles: unwrapped before differentiation.
+ANGLES = ("psi", "phi", "theta")
+#: The timing row: record length, s, and the target for one diagnosis, s.
+TIMING_DURATION, TIMING_TARGET = 600.0, 30.0
+Ranking = list[tuple[str, str, dict[str, str]]]
+
+
+# -- the SINDy baseline ---------------------------------------------------------------------------
+def import_pysindy() -> ModuleType:
+    """pysindy, or exit with how to install it."""
+    try:
+        import pysindy
+    except ImportError:
+        sys.exit('the SINDy baseline needs pysindy: pip install -e ".[bench]" (or pass --no-sindy)')
+    return pysindy
+
+
+def sindy_applicable(model: str) -> bool:
+    """Whether every measured channel of ``model`` is one of its states."""
+    vehicle = get_model(model)
+    channels = getattr(vehicle, "measured_names", vehicle.state_names)
+    return set(channels) <= set(vehicle.state_names)
+
+
+def _rms(a: FloatArray) -> FloatArray:
+    return np.sqrt(np.mean(a**2, axis=0)) + 1e-300
+
+
+def sindy_ranking(recording: Recording, vehicle: VehicleModel, threshold: float,
+                  keep: int = 2) -> Ranking:
+    """The ``keep`` best distinct catalogue answers of plain SINDy on the residuals of
+    ``recording`` (measured channels all states; see the module docstring)."""
+    ps = import_pysindy()
+    channels = list(recording.measured_names)
+    y = recording.measurements.copy()
+    for j, name in enumerate(channels):
+        if name in ANGLES:
+            y[:, j] = np.unwrap(y[:, j])
+    u = recording.inputs
+    differentiate = ps.SmoothedFiniteDifference()
+    x_dot = differentiate(y, t=recording.dt)
+    x = differentiate.smoothed_x_
+    full = np.tile(vehicle.x0, (len(y), 1))  # unmeasured states at their nominal value
+    measured = [vehicle.state_names.index(c) for c in channels]
+    full[:, measured] = x
+    residual = x_dot - vehicle.rhs(full, u)[:, measured]
+    xs, us = x / _rms(x), u / _rms(u)
+    names = channels + list(vehicle.input_names)
+    model = ps.SINDy(optimizer=ps.STLSQ(threshold=threshold),
+                     feature_library=ps.PolynomialLibrary(degree=3))
+    with warnings.catch_warnings():  # "eliminated all coefficients" is an answer here
+        warnings.simplefilter("ignore", UserWarning)
+        model.fit(xs, t=recording.dt, x_dot=residual / np.std(x_dot, axis=0), u=us,
+                  feature_names=names)
+    columns = dict(zip(names, np.hstack([xs, us]).T, strict=True))
+    terms = model.get_feature_names()
+    size = np.array([1.0 if t == "1" else
+                     _rms(np.prod([columns[f] for f in term_factors(t, names)], axis=0))
+                     for t in terms])
+    importance = np.abs(model.coefficients()) * size
+    out: Ranking = []
+    for flat in np.argsort(-importance, axis=None):
+        i, k = np.unravel_index(flat, importance.shape)
+        if importance[i, k] == 0 or len(out) == keep:
+            break
+        answer = sindy_term_to_effect(terms[k], channels[i], vehicle.state_names,
+                                      vehicle.input_names)
+        if answer[:2] not in [a[:2] for a in out]:
+            out.append(answer)
+    return out
+
+
+def sindy_right(case: Case, ranking: Ranking) -> bool:
+    """Every true effect (effect and target) among the first ``len(case.effects)`` answers."""
+    top = [a[:2] for a in ranking[:len(case.effects)]]
+    return all((e.effect, e.target) in top for e in case.effects)
+
+
+# -- running the cases ----------------------------------------------------------------------------
+def evaluate(case: Case, thresholds: Sequence[float]) -> tuple[Outcome, dict[float, bool]]:
+    """Diagnose ``case`` and, where it applies, grade SINDy at each threshold on the same
+    record (an empty dict where it does not)."""
+    recording = case.recording()
+    outcome = run_case(case, recording)
+    if not (case.effects and thresholds and sindy_applicable(case.model)):
+        return outcome, {}
+    vehicle = get_model(case.model)
+    return outcome, {th: sindy_right(case, sindy_ranking(recording, vehicle, th))
+                     for th in thresholds}
+
+
+def build_cases(vehicles: Sequence[str], noises: Sequence[float], seeds: Sequence[int],
+                pairs: bool, effect_free: int, pool: ProcessPoolExecutor | None) -> list[Case]:
+    """:func:`catalogue_cases`, one (vehicle, seed) per worker: sizing an effect runs a pilot
+    simulation (~2 s)."""
+    jobs = [dict(vehicles=(v,), noises=tuple(noises), seeds=(s,), pairs=pairs,
+                 effect_free=effect_free if k == 0 else 0)
+            for v in vehicles for k, s in enumerate(seeds)]
+    if pool is None:
+        return [c for job in jobs for c in catalogue_cases(**job)]
+    futures = [pool.submit(catalogue_cases, **job) for job in jobs]
+    return [c for f in futures for c in f.result()]
+
+
+def run_cases(cases: Sequence[Case], thresholds: Sequence[float],
+              pool: ProcessPoolExecutor | None) -> list[tuple[Outcome, dict[float, bool]]]:
+    """:func:`evaluate` on every case (in the pool if any), in the cases' order."""
+    bar = tqdm(total=len(cases), desc="diagnosing", unit="case")
+    if pool is None:
+        results = []
+        for case in cases:
+            results.append(evaluate(case, thresholds))
+            bar.update()
+    else:
+        futures = {pool.submit(evaluate, case, thresholds): k for k, case in enumerate(cases)}
+        results = [None] * len(cases)
+        for future in as_completed(futures):
+            results[futures[future]] = future.result()
+            bar.update()
+    bar.close()
+    return results
+
+
+# -- the timing row -------------------------------------------------------------------------------
+def timing(seed: int = 0) -> dict[str, Any]:
+    """Seconds of one diagnosis of the 10-minute USV record and of one nominal smoother call,
+    in this process pinned to one CPU."""
+    from estimators.discrepancy import diagnose
+    from estimators.discrepancy.residuals import estimate
+
+    pinned = pin_to_one_cpu()
+    effect = typical_effect("usv", "quadratic_damping", "r", seed=seed, duration=TIMING_DURATION)
+    recording = synthesize("usv", [effect], duration=TIMING_DURATION, noise=0.10, seed=seed)
+    start = time.perf_counter()
+    estimate(recording, get_model("usv"))
+    smoother = time.perf_counter() - start
+    start = time.perf_counter()
+    diagnose(recording, "usv")
+    seconds = time.perf_counter() - start
+    return {"case": f"usv/quadratic_damping:r/noise=0.10/{TIMING_DURATION:.0f} s at 10 Hz",
+            "seconds": seconds, "target": TIMING_TARGET, "passed": seconds <= TIMING_TARGET,
+            "smoother_seconds": smoother, "ratio": seconds / smoother, "cpu": pinned}
+
+
+# -- reports --------------------------------------------------------------------------------------
+def _flag(value: bool | None) -> str:
+    return "-" if value is None else ("yes" if value else "NO")
+
+
+def format_cases(outcomes: Sequence[Outcome]) -> str:
+    """One line per case: the checks, the top findings and the time."""
+    width = max([len(o.case) for o in outcomes] + [4]) + 2
+    lines = [f"{'case':<{width}}{'ranked':>7}{'param':>6}{'impr.':>7}{'s':>6}  top findings",
+             "-" * (width + 90)]
+    for o in outcomes:
+        impr = "-" if o.improvement is None else f"{o.improvement:.0%}"
+        ok = o.ranked_right if o.true else not o.false_alarm
+        top = ", ".join(f"{f} ({c:.2f})" for f, c in zip(o.found[:3], o.confidences,
+                                                          strict=False))
+        note = top or (o.reason[:60] if o.reason else "none")
+        lines.append(f"{o.case:<{width}}{_flag(ok):>7}{_flag(o.parameter_ok):>6}{impr:>7}"
+                     f"{o.seconds:>6.1f}  {note}")
+    return "\n".join(lines)
+
+
+def format_confusion(table: dict[str, dict[str, int]]) -> str:
+    """The confusion table in Markdown: true effect (rows) by found effect (columns)."""
+    found = sorted({f for row in table.values() for f in row}, key=lambda f: (f == "none", f))
+    lines = ["| true \\ found | " + " | ".join(found) + " |",
+             "|---|" + "---:|" * len(found)]
+    for truth in sorted(table, key=lambda t: (t == "none", t)):
+        cells = [str(table[truth].get(f, "")) for f in found]
+        lines.append(f"| {truth} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def format_acceptance(summary: dict[str, dict[str, Any]], time_row: dict | None) -> str:
+    labels = {"ranked_right": "ranked right (cases with effects)",
+              "parameter_ok": "key parameter within 30 % (matched)",
+              "improvement_ok": "held-out improvement >= 30 % (effects)",
+              "clean": "effect-free records without a false alarm"}
+    lines = []
+    for key, row in summary.items():
+        rate = "n/a" if row["rate"] is None else f"{row['rate']:.0%}"
+        lines.append(f"{'pass' if row['passed'] else 'FAIL':<6}{labels[key]:<44}{rate:>6} of "
+                     f"{row['n']:<4} target >= {row['target']:.0%}")
+    if time_row:
+        t = time_row
+        what = "one diagnosis, 10 min record, one core"
+        lines.append(f"{'pass' if t['passed'] else 'FAIL':<6}{what:<44}{t['seconds']:>5.1f} s"
+                     f"      target <= {t['target']:.0f} s; nominal smoother "
+                     f"{t['smoother_seconds']:.1f} s (x{t['ratio']:.1f}), {t['cpu']}")
+    return "\n".join(lines)
+
+
+def compare(cases: Sequence[Case], results: Sequence[tuple[Outcome, dict[float, bool]]],
+            thresholds: Sequence[float]) -> list[dict[str, Any]]:
+    """Ranked-right rates of the diagnosis and of SINDy (each threshold) on the same cases
+    (with effects, SINDy applicable), per noise level."""
+    rows = []
+    for noise in sorted({c.noise for c in cases}):
+        same = [(o, s) for c, (o, s) in zip(cases, results, strict=True)
+                if c.noise == noise and s]
+        if not same:
+            continue
+        row = {"noise": noise, "n": len(same),
+               "diagnosis": sum(o.ranked_right for o, _ in same) / len(same)}
+        row["sindy"] = {th: sum(s[th] for _, s in same) / len(same) for th in thresholds}
+        rows.append(row)
+    return rows
+
+
+def format_comparison(rows: Sequence[dict[str, Any]]) -> str:
+    thresholds = list(rows[0]["sindy"]) if rows else []
+    head = "".join(f"{'SINDy ' + format(th, 'g'):>14}" for th in thresholds)
+    lines = [f"{'noise':<8}{'cases':>6}{'diagnosis':>11}{head}", "-" * (25 + 14 * len(thresholds))]
+    for row in rows:
+        cells = "".join(f"{row['sindy'][th]:>14.0%}" for th in thresholds)
+        lines.append(f"{row['noise']:<8.2f}{row['n']:>6}{row['diagnosis']:>11.0%}{cells}")
+    return "\n".join(lines)
+
+
+# -- main -----------------------------------------------------------------------------------------
+def _floats(text: str) -> list[float]:
+    return [float(v) for v in text.split(",") if v]
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true",
+                        help="one seed, no pairs, one effect-free record per vehicle and noise")
+    parser.add_argument("--vehicles", default="usv,hydrofoil",
+                        help="comma-separated models (usv,hydrofoil)")
+    parser.add_argument("--noise", default="0.05,0.10",
+                        help="comma-separated sensor noise fractions (0.05,0.10)")
+    parser.add_argument("--seeds", default="0,1", help="comma-separated seeds (0,1)")
+    parser.add_argument("--with-20", action="store_true",
+                        help="also 20 %% noise, both methods, in the comparison only "
+                        "(not in the acceptance rates)")
+    parser.add_argument("--jobs", type=int, default=os.cpu_count() or 1,
+                        help="worker processes (os.cpu_count(); 1: run in this process)")
+    parser.add_argument("--no-sindy", action="store_true", help="skip the SINDy baseline")
+    parser.add_argument("--sindy-thresholds", default=str(SINDY_THRESHOLD),
+                        help=f"comma-separated STLSQ thresholds to report ({SINDY_THRESHOLD})")
+    parser.add_argument("--no-timing", action="store_true", help="skip the timing row")
+    parser.add_argument("--json", help="also write the outcomes, rates and timing as JSON")
+    return parser
+
+
+def main() -> int:
+    args = _parser().parse_args()
+    thresholds = [] if args.no_sindy else _floats(args.sindy_thresholds)
+    if thresholds:
+        import_pysindy()  # fail before the long part
+    vehicles = [v for v in args.vehicles.split(",") if v]
+    noises = _floats(args.noise)
+    seeds = [int(s) for s in args.seeds.split(",") if s][:1 if args.quick else None]
+    extra = [0.20] if args.with_20 and 0.20 not in noises else []
+    pairs, effect_free = not args.quick, 1 if args.quick else 3
+    print(f"numpy {np.__version__}, OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}, "
+          f"{args.jobs} job(s); vehicles {vehicles}, noise {noises + extra}, seeds {seeds}")
+    start = time.perf_counter()
+    with ProcessPoolExecutor(args.jobs) if args.jobs > 1 else nullcontext() as pool:
+        cases = build_cases(vehicles, noises + extra, seeds, pairs, effect_free, pool)
+        results = run_cases(cases, thresholds, pool)
+    outcomes = [o for o, _ in results]
+    accepted = [o for c, o in zip(cases, outcomes, strict=True) if c.noise not in extra]
+    print(format_cases(outcomes), "\n\nConfusion (true effect by top finding; noise "
+          f"{', '.join(f'{n:.2f}' for n in noises)}):\n\n{format_confusion(confusion(accepted))}\n")
+    comparison = compare(cases, results, thresholds) if thresholds else []
+    if comparison:
+        print(f"Ranked right, diagnosis vs plain SINDy on the residuals (same cases):\n"
+              f"{format_comparison(comparison)}\n")
+    time_row = None if args.no_timing else timing()
+    summary = summarize(accepted)
+    print(format_acceptance(summary, time_row))
+    print(f"\n{len(cases)} cases in {time.perf_counter() - start:.0f} s")
+    passed = all(r["passed"] for r in summary.values()) and (time_row or {}).get("passed", True)
+    if args.json:
+        with open(args.json, "w") as f:
+            json.dump({"settings": vars(args), "outcomes": [dataclasses.asdict(o)
+                                                            for o in outcomes],
+                       "summary": summary, "confusion": confusion(accepted),
+                       "sindy": comparison, "timing": time_row, "passed": passed},
+                      f, indent=2, default=str)
+    return 0 if passed else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
