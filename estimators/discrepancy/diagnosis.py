@@ -359,19 +359,16 @@ def _confidences(scored: list[Scored]) -> None:
         s.confidence = float((1 - s.p_value) * w)
 
 
-def _backfit(res: Residuals, evaluator: Evaluator, findings: list[Scored],
-             rounds: int = 2) -> None:
-    """Refit each finding given the others."""
-    for _ in range(rounds):
-        for k, finding in enumerate(findings):
-            others = [f.fitted for j, f in enumerate(findings) if j != k]
-            G = res.innovations.response(finding.family.w, finding.family.v)  # type: ignore
-            finding.fitted = fit_member(res, evaluator, others, finding.family, G)
+def _backfit(res: Residuals, evaluator: Evaluator, findings: list[Scored]) -> None:
+    """Refit each finding given the others, on the whole record."""
+    for finding, fitted in zip(findings, fit_findings(res, evaluator, findings), strict=True):
+        finding.fitted = fitted
 
 
 def fit_findings(res: Residuals, evaluator: Evaluator, findings: list[Scored],
-                 rows: BoolArray) -> list[Fitted]:
-    """The findings refitted jointly on ``rows`` only (for an honest validation on the rest)."""
+                 rows: BoolArray | None = None) -> list[Fitted]:
+    """The findings refitted jointly (backfitting) on ``rows`` (default: all; the first part
+    only for an honest validation on the rest)."""
     fitted = [s.fitted for s in findings]
     for _ in range(2 if len(findings) > 1 else 1):
         for k, finding in enumerate(findings):

@@ -72,9 +72,8 @@ class Family:
         return Effect(self.effect, self.target, parameters)
 
     def term(self, member: int, coefficient: float = 1.0) -> FloatArray:
-        """The state-derivative term ``(T, n)`` of one member (zeros for a channel offset)."""
-        if self.w is None:
-            return np.zeros((self.v.shape[0], 0))  # type: ignore[union-attr]
+        """The state-derivative term ``(T, n)`` of one member of a state-equation family."""
+        assert self.w is not None, "a channel offset has no state-derivative term"
         return self.w[:, :, member] * coefficient
 
 
