@@ -30,13 +30,16 @@ if TYPE_CHECKING:  # marine_envs does not import the estimators at run time
 Entry = tuple[str, str, dict[str, str]]
 _INPUT_EFFECTS = ("input_gain", "input_delay", "input_saturation", "input_deadzone",
                   "input_rate_limit")
-#: Per vehicle, each of the 15 catalogue effects once, on a target where it matters.
+#: Per vehicle, each of the 15 catalogue effects once, on a target where it matters and where
+#: a record can tell it from the others: on the USV's linear roll model a roll-angle bias and
+#: a steady heel moment make the same record (the diagnosis reports both at confidence ~0.5),
+#: so the USV's sensor bias is on the yaw-rate gyro.
 TARGETS: dict[str, list[Entry]] = {
     "usv": [("current", "r", {}), ("linear_damping", "p", {}), ("quadratic_damping", "r", {}),
             ("coupling", "p", {"source": "r"}),
             *[(e, "delta", {}) for e in _INPUT_EFFECTS],
             ("wave_frequency", "p", {}), ("parameter_change", "r", {}),
-            ("sensor_bias", "phi", {}), ("nonlinear_damping", "p", {}),
+            ("sensor_bias", "r", {}), ("nonlinear_damping", "p", {}),
             ("nonlinear_restoring", "p", {"source": "phi"}),
             ("unlisted", "r", {"expression": "phi*r"})],
     "hydrofoil": [("current", "xi_dot", {}), ("linear_damping", "theta_dot", {}),
@@ -47,13 +50,27 @@ TARGETS: dict[str, list[Entry]] = {
                   ("sensor_bias", "theta", {}), ("nonlinear_damping", "xi_dot", {}),
                   ("nonlinear_restoring", "theta_dot", {"source": "theta"}),
                   ("unlisted", "xi_dot", {"expression": "theta*xi_dot"})],
+    "hovercraft": [("current", "r", {}), ("linear_damping", "v", {}),
+                   ("quadratic_damping", "u", {}), ("coupling", "r", {"source": "v"}),
+                   *[(e, "delta", {}) for e in _INPUT_EFFECTS],
+                   ("wave_frequency", "r", {}), ("parameter_change", "r", {}),
+                   ("sensor_bias", "psi", {}), ("nonlinear_damping", "r", {}),
+                   ("nonlinear_restoring", "v", {"source": "psi"}),
+                   ("unlisted", "u", {"expression": "v*r"})],
 }
+#: The vehicles of the acceptance set. The hydrofoil's cases stay available but out of the
+#: default set: its flaps may move only ~0.6 deg about trim before they stall, so under the
+#: autopilot an input effect cannot be told from the pitch damping it feeds back (see the note
+#: of issue 6 and ``benchmarks/diagnosis.py --vehicles hydrofoil``).
+ACCEPTANCE_VEHICLES = ("usv", "hovercraft")
 #: Per vehicle, two-effect combinations.
 PAIRS: dict[str, list[tuple[Entry, Entry]]] = {
-    "usv": [(("quadratic_damping", "r", {}), ("sensor_bias", "phi", {})),
+    "usv": [(("quadratic_damping", "r", {}), ("sensor_bias", "r", {})),
             (("input_delay", "delta", {}), ("current", "r", {}))],
     "hydrofoil": [(("input_delay", "alpha_s1", {}), ("current", "xi_dot", {})),
                   (("quadratic_damping", "xi_dot", {}), ("sensor_bias", "theta", {}))],
+    "hovercraft": [(("input_gain", "delta", {}), ("linear_damping", "v", {})),
+                   (("quadratic_damping", "u", {}), ("sensor_bias", "psi", {}))],
 }
 #: Effect-free cases use seeds from here on, apart from the effect cases' seeds.
 EFFECT_FREE_SEED = 100
@@ -143,7 +160,7 @@ def build_effect(model: str, entry: Entry, strength: float = 0.3, seed: int = 0,
     return _sized(model, effect, target, tuple(sorted(extra.items())), strength, seed, duration)
 
 
-def catalogue_cases(vehicles: Sequence[str] = ("usv", "hydrofoil"),
+def catalogue_cases(vehicles: Sequence[str] = ACCEPTANCE_VEHICLES,
                     noises: Sequence[float] = (0.05, 0.10), seeds: Sequence[int] = (0,),
                     strength: float = 0.3, pairs: bool = True, effect_free: int = 3,
                     duration: float = 300.0) -> list[Case]:

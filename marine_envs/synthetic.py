@@ -35,7 +35,7 @@ SEA: dict[str, tuple[tuple[float, ...], float]] = {
                                                                       # surge
     "rov": ((0.05, 0.05, 0.01, 0.0), 60.0),             # current, m/s; no morph command
     "dp_vessel": ((1.0,) * 6, 0.0),                     # the model's own white-noise inputs
-    "hovercraft": ((2.0, 2.0), 10.0),                   # wind gusts, m/s
+    "hovercraft": ((0.7, 0.7), 10.0),                   # wind gusts, m/s
 }
 #: Reference steps per model: the largest offset from the nominal state, by state.
 REFERENCE: dict[str, dict[str, float]] = {

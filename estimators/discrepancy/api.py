@@ -78,6 +78,7 @@ class Diagnosis:
     windows: list[dict[str, Any]] = field(default_factory=list)
     band: dict[str, float] | None = None
     findings: list[Finding] = field(default_factory=list)
+    unconfirmed: list[Finding] = field(default_factory=list)
     fit: dict[str, Any] = field(default_factory=dict)
     calibration: dict[str, float] = field(default_factory=dict)
     residuals: Residuals | None = field(default=None, repr=False)
@@ -88,10 +89,9 @@ class Diagnosis:
         """The JSON document (see the issue's schema), with plain Python numbers."""
         out = {"model": self.model, "mismatch": self.mismatch, "channels": self.channels,
                "windows": self.windows, "band": self.band,
-               "findings": [{k: getattr(f, k) for k in ("effect", "target", "parameters", "std",
-                                                         "confidence", "explanation")}
-                            | {"improvement": f.improvement} for f in self.findings],
-               "fit": self.fit}
+               "findings": [_finding_dict(f) for f in self.findings], "fit": self.fit}
+        if self.unconfirmed:
+            out["unconfirmed"] = [_finding_dict(f) for f in self.unconfirmed]
         if self.reason:
             out["reason"] = self.reason
         if self.calibration:
@@ -108,8 +108,11 @@ class Diagnosis:
         """A few lines for a terminal."""
         if self.mismatch is None:
             return f"{self.model}: cannot diagnose: {self.reason}"
+        withdrawn = [f"  withdrawn, no held-out improvement: {f.effect} on {f.target}"
+                     for f in self.unconfirmed]
         if not self.mismatch:
-            return f"{self.model}: no significant mismatch: the nominal model explains the record"
+            return "\n".join([f"{self.model}: no significant mismatch: the nominal model "
+                              "explains the record", *withdrawn])
         lines = [f"{self.model}: mismatch found"]
         for k, f in enumerate(self.findings, 1):
             values = ", ".join(f"{n}={_fmt(v)}" + (f" ± {_fmt(f.std[n])}" if n in f.std else "")
@@ -117,7 +120,7 @@ class Diagnosis:
             lines.append(f"  {k}. {f.effect} on {f.target} ({values}), confidence "
                          f"{f.confidence:.2f}: {f.explanation}")
         lines.append(f"  held-out improvement: {self.fit.get('improvement', 0):.0%}")
-        return "\n".join(lines)
+        return "\n".join(lines + withdrawn)
 
 
 def diagnose(recording: Recording | str | Path, model: str | VehicleModel | None = None, *,
@@ -162,6 +165,7 @@ def diagnose(recording: Recording | str | Path, model: str | VehicleModel | None
                           findings=findings)
     _locate(diagnosis)
     _validate(diagnosis)
+    _confirm(diagnosis)
     return diagnosis
 
 
@@ -316,6 +320,22 @@ def _validate(diagnosis: Diagnosis) -> None:
     }
 
 
+def _confirm(diagnosis: Diagnosis) -> None:
+    """Withdraw the findings whose own term, refitted on the first part, does not improve the
+    held-out predictions: the in-sample evidence was the sea's colour or the noise, not a term
+    the data repeat. They are kept under ``unconfirmed``; the rest are validated again."""
+    selection = diagnosis.selection
+    assert selection is not None
+    withdrawn = [k for k, s in enumerate(selection.findings) if s.alone <= 0]
+    if not withdrawn:
+        return
+    diagnosis.unconfirmed += [diagnosis.findings[k] for k in withdrawn]
+    selection.findings = [s for k, s in enumerate(selection.findings) if k not in withdrawn]
+    diagnosis.findings = [f for k, f in enumerate(diagnosis.findings) if k not in withdrawn]
+    diagnosis.mismatch = bool(diagnosis.findings)
+    _validate(diagnosis)
+
+
 def findings_model(res: Residuals, fitted: Sequence[Fitted]
            ) -> tuple[list[Effect], dict[int, FloatArray], FloatArray]:
     """Effects, wave forcings and smoothed-state shift of fitted findings, as
@@ -324,6 +344,11 @@ def findings_model(res: Residuals, fitted: Sequence[Fitted]
     shift = sum((res.innovations.smoothed_shift(f.w, f.v) for f in fitted),  # type: ignore
                 np.zeros_like(res.x))
     return [f.effect for f in fitted], forcing, shift
+
+
+def _finding_dict(f: Finding) -> dict[str, Any]:
+    return {k: getattr(f, k) for k in ("effect", "target", "parameters", "std", "confidence",
+                                       "explanation", "improvement")}
 
 
 def _plain(value: Any) -> Any:

@@ -233,8 +233,10 @@ def _score(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], before:
     sigma2 = float(np.mean(before**2))  # per channel and sample
     b, a = float(np.sum(before**2)), float(np.sum(after**2))
     fitted = fit_member(res, evaluator, accepted, family, G)
-    # a simpler term that explains as much is preferred: a BIC charge per extra parameter
-    charge = 0.5 * math.log(before.size) * (family.n_parameters - 1)
+    # a simpler term that explains as much is preferred: a BIC charge per extra parameter and
+    # the description length of the member chosen (which source, delay, time, library term)
+    charge = 0.5 * math.log(before.size) * (family.n_parameters - 1) \
+        + math.log(len(family.members))
     return Scored(family, fitted, 1 - a / b, (b - a) / (2 * sigma2) - charge, t,
                   min(1.0, p * tried))
 

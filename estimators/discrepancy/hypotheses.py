@@ -213,7 +213,8 @@ def wave_families(res: Residuals, alpha: float = 1e-4, max_zeta: float = 0.1) ->
             continue
         error = res.error[:, i]
         peak = spectral_peak(error, res.dt)
-        if peak is None or peak["p_value"] > alpha or peak["zeta"] > max_zeta:
+        if peak is None or peak["p_value"] > alpha or peak["zeta"] > max_zeta \
+                or _at_natural_frequency(res, peak):
             continue
         band = _band_pass(error, peak["omega"], max(peak["zeta"], peak["resolution"]), res.dt)
         column = np.append(band, band[-1])
@@ -221,6 +222,18 @@ def wave_families(res: Residuals, alpha: float = 1e-4, max_zeta: float = 0.1) ->
                      [{"omega": peak["omega"], "zeta": peak["zeta"]}],
                      _in_equation(i, column[:, None], n), coefficient="gain", n_parameters=2,
                      details=peak)
+
+
+def _at_natural_frequency(res: Residuals, peak: dict[str, float]) -> bool:
+    """Whether the peak sits on a lightly damped mode of the nominal model: the sea rings
+    such a mode, and the filter's process noise (white, the sea is not) leaves a peak there
+    in every record. Wrong damping of that mode is a ``linear_damping`` finding instead."""
+    eigenvalues = np.linalg.eigvals(res.model.linearize()[0])
+    frequency = np.abs(eigenvalues)
+    zeta = -eigenvalues.real / np.maximum(frequency, 1e-12)
+    light = (frequency > 0) & (zeta < 0.3)
+    reach = np.maximum(2 * peak["resolution"], 2 * zeta * frequency)
+    return bool(np.any(light & (np.abs(peak["omega"] - frequency) <= reach)))
 
 
 def spectral_peak(x: FloatArray, dt: float, segment: float = 60.0) -> dict[str, float] | None:
@@ -248,7 +261,8 @@ def spectral_peak(x: FloatArray, dt: float, segment: float = 60.0) -> dict[str, 
         hi += 1
     resolution = 2 * np.pi / (nperseg * dt)
     peak = _parabolic(omega, np.log(psd + 1e-300), k)
-    width = max(omega[hi] - omega[lo] - resolution, resolution / 2)
+    # the Hann window's main lobe holds a pure line above half power over ~3 bins
+    width = max(omega[hi] - omega[lo] - 2 * resolution, resolution / 2)
     return {"omega": float(peak), "zeta": float(width / (2 * peak)), "ratio": float(ratio[k]),
             "p_value": p_value, "resolution": float(resolution)}
 

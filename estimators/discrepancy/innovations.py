@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
+from scipy import linalg, ndimage, signal
 
 from ..ekf import ExtendedKalmanFilter, FilterResult
 
@@ -30,14 +30,21 @@ FloatArray = NDArray[np.float64]
 #: Order of the autoregressive model of each channel's innovations: the unmodelled sea is
 #: coloured, so the filter's innovations are too; their prediction-error filter whitens them.
 AR_ORDER = 20
+#: The colour is the innovation spectrum's running median over this many Welch bins (about
+#: 0.7 rad/s at 10 Hz): broad sea colour is whitened, a narrow peak (an unmodelled
+#: oscillation, ``zeta`` up to about 0.1) is a model error and stays.
+BACKGROUND_BINS = 11
 
 
-def _ar_fit(x: FloatArray, order: int) -> FloatArray:
-    """The prediction-error filter ``[1, -a_1, ..., -a_p]`` of ``x`` (least squares, about
-    its mean: a constant in the innovations is a model error to be explained, not colour)."""
-    x = x - x.mean()
-    X = np.column_stack([x[order - k - 1:len(x) - k - 1] for k in range(order)])
-    a, *_ = np.linalg.lstsq(X, x[order:], rcond=None)
+def _ar_fit(x: FloatArray, order: int, segment: int = 512) -> FloatArray:
+    """The prediction-error filter ``[1, -a_1, ..., -a_p]`` of the smooth background of
+    ``x``'s spectrum (Yule-Walker on the autocovariance of the running-median Welch spectrum,
+    about the mean: a constant or a narrow peak is a model error to explain, not colour)."""
+    _, psd = signal.welch(x - x.mean(), nperseg=min(segment, len(x) // 4))
+    background = np.exp(ndimage.median_filter(np.log(psd + 1e-300), BACKGROUND_BINS,
+                                              mode="nearest"))
+    acov = np.fft.irfft(background)[:order + 1]
+    a = linalg.solve_toeplitz(acov[:order], acov[1:])
     return np.concatenate([[1.0], -a])
 
 
