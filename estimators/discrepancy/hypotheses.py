@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 from scipy import signal, stats
 
 from marine_envs.effects import Effect, applied_inputs
+from marine_envs.models import VehicleModel
 
 from .residuals import Residuals, _output_matrix
 
@@ -109,6 +110,7 @@ def state_families(res: Residuals) -> Iterator[Family]:
     """Current, linear/quadratic/cubic damping, coupling and cubic restoring terms."""
     x, names = _states(res), res.model.state_names
     n = len(names)
+    displacements = _displacements(res.model)
     for i in _targets(res):
         xi = x[:, i]
         singles = [("current", np.ones_like(xi), {}, "b"),
@@ -120,11 +122,22 @@ def state_families(res: Residuals) -> Iterator[Family]:
                 yield Family(effect, names[i], [fixed], _in_equation(i, column[:, None], n),
                              coefficient=name)
         sources = [s for s in _targets(res) if s != i and np.ptp(x[:, s]) > 0]
-        for effect, power in (("coupling", 1), ("nonlinear_restoring", 3)):
-            if sources:
-                columns = np.column_stack([x[:, s] ** power for s in sources])
-                yield Family(effect, names[i], [{"source": names[s]} for s in sources],
+        for effect, power, allowed in (("coupling", 1, sources),
+                                       ("nonlinear_restoring", 3, displacements)):
+            chosen = [s for s in sources if s in allowed]
+            if chosen:
+                columns = np.column_stack([x[:, s] ** power for s in chosen])
+                yield Family(effect, names[i], [{"source": names[s]} for s in chosen],
                              _in_equation(i, columns, n), n_parameters=2)
+
+
+def _displacements(model: VehicleModel) -> set[int]:
+    """The states a restoring force can depend on: positions and angles, whose equations are
+    kinematic (nothing damps them, no input or disturbance drives them). A cubic in a
+    velocity is damping, not restoring."""
+    A, B, E = model.linearize()
+    return {i for i in range(A.shape[0])
+            if A[i, i] == 0 and not B[i].any() and not E[i].any()}
 
 
 def change_families(res: Residuals, margin: float = 0.05, times: FloatArray | None = None,
