@@ -32,7 +32,8 @@ the time one diagnosis takes on one core.
    the middle value is kept. Without any effect and without noise the residual is already 1.4-13
    times the spread of the derivative it belongs to (USV: the unmeasured sway speed held at zero;
    hydrofoil: the stiff heave-pitch model evaluated on smoothed 10 Hz states, and the sea), while
-   an effect is sized at 0.3 of it. Its ranked-right rate is reported next to the diagnosis's on
+   an effect is sized at 0.3 of it. On the hovercraft, every state measured, it ranks no case
+   right either (2026-11-21, 5 % and 10 % noise). Its ranked-right rate is reported next to the diagnosis's on
    the same cases, per noise level (``--with-20`` adds 20 % noise for both).
 
 3. Timing: a 10-minute record at 10 Hz of the USV with quadratic damping on r at 10 % noise,
@@ -41,7 +42,8 @@ the time one diagnosis takes on one core.
    (``estimators.discrepancy.residuals.estimate``) on the same record, and the ratio.
 
 Exit code 1 when an acceptance rate or the time target is missed. Run time on 2 cores: about
-5 min with ``--quick --vehicles usv`` (32 cases, ~14 s each), about 20 min in full (148 cases).
+5 min with ``--quick --vehicles usv`` (32 cases), 9 min with ``--seeds 0`` (80 cases, 6-13 s
+each), about 18 min in full (seeds 0 and 1).
 
     python benchmarks/diagnosis.py [--quick] [--vehicles usv,hovercraft] [--noise 0.05,0.10]
                                    [--seeds 0,1] [--jobs N] [--with-20] [--json out.json]

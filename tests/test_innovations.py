@@ -1,8 +1,10 @@
 """The innovation sensitivities the diagnosis fits: exact for a linear model."""
 
 import numpy as np
+from scipy import signal
 
-from estimators.discrepancy.innovations import Innovations
+from estimators.discrepancy.hypotheses import _displacements
+from estimators.discrepancy.innovations import AR_ORDER, Innovations, _ar_fit
 from estimators.ekf import ExtendedKalmanFilter
 from marine_envs.models import get_model
 from marine_envs.synthetic import synthesize
@@ -35,3 +37,22 @@ def test_a_missing_term_changes_the_innovations_as_the_sensitivity_says():
     np.testing.assert_allclose(nu_b, nu - b * g, atol=1e-3 * np.abs(b * g).max())
     shift = innovations.smoothed_shift(b * w[:, :, 0])
     assert np.all(np.isfinite(shift)) and np.abs(shift[:, 3]).max() > 0
+
+
+def test_whitening_removes_broad_colour_but_keeps_a_narrow_peak():
+    rng = np.random.default_rng(0)
+    t = np.arange(6000) * 0.1
+    coloured = signal.lfilter([1.0], [1.0, -0.8], rng.standard_normal(t.size))  # AR(1) sea
+    a = _ar_fit(coloured, AR_ORDER)
+    assert abs(a[1] + 0.8) < 0.1  # the colour is modelled...
+    wave = coloured + 2.0 * np.sin(1.0 * t)  # ...a 1 rad/s line on top is not
+    _, response = signal.freqz(_ar_fit(wave, AR_ORDER), worN=[1.0 * 0.1])
+    _, colour_only = signal.freqz(a, worN=[1.0 * 0.1])
+    assert abs(response[0]) > 0.7 * abs(colour_only[0])
+
+
+def test_restoring_terms_depend_on_positions_and_angles():
+    names = {m: get_model(m).state_names for m in ("usv", "hovercraft")}
+    assert {names["usv"][i] for i in _displacements(get_model("usv"))} == {"psi", "phi"}
+    assert {names["hovercraft"][i] for i in _displacements(get_model("hovercraft"))} == \
+        {"north", "east", "psi"}

@@ -308,6 +308,7 @@ def _validate(diagnosis: Diagnosis) -> None:
                                                           ro.errors(effects, forcing, shift)))
     for finding, scored in zip(diagnosis.findings, selection.findings, strict=True):
         finding.improvement = scored.alone
+        finding.explanation = explain(scored.fitted.effect, scored, res)  # quotes it
     diagnosis.fit = {
         "before": {"rmse": ro.rmse([])},
         "after": {"rmse": ro.rmse(effects, forcing, shift)},

@@ -99,6 +99,12 @@ def _targets(res: Residuals) -> list[int]:
     return [i for i in range(len(res.model.state_names)) if res.observable[i]]
 
 
+def _dynamic_targets(res: Residuals) -> list[int]:
+    """Observable states whose equations carry forces (not kinematics)."""
+    displacements = _displacements(res.model)
+    return [i for i in _targets(res) if i not in displacements]
+
+
 def _in_equation(i: int, columns: FloatArray, n: int) -> FloatArray:
     """``(T, R)`` regressors placed in equation ``i``: ``(T, n, R)``."""
     w = np.zeros((columns.shape[0], n, columns.shape[1]))
@@ -107,7 +113,8 @@ def _in_equation(i: int, columns: FloatArray, n: int) -> FloatArray:
 
 
 def state_families(res: Residuals) -> Iterator[Family]:
-    """Current, linear/quadratic/cubic damping, coupling and cubic restoring terms."""
+    """A current in every observable state's equation; linear/quadratic/cubic damping,
+    coupling and cubic restoring in the force (non-kinematic) equations."""
     x, names = _states(res), res.model.state_names
     n = len(names)
     displacements = _displacements(res.model)
@@ -118,9 +125,11 @@ def state_families(res: Residuals) -> Iterator[Family]:
                    ("quadratic_damping", xi * np.abs(xi), {}, "c"),
                    ("nonlinear_damping", xi**3, {"form": "cubic"}, "c")]
         for effect, column, fixed, name in singles:
-            if effect == "current" or np.ptp(column) > 0:
+            if effect == "current" or (np.ptp(column) > 0 and i not in displacements):
                 yield Family(effect, names[i], [fixed], _in_equation(i, column[:, None], n),
                              coefficient=name)
+        if i in displacements:
+            continue  # kinematics: geometry, exact but for a drift (the current above)
         sources = [s for s in _targets(res) if s != i and np.ptp(x[:, s]) > 0]
         for effect, power, allowed in (("coupling", 1, sources),
                                        ("nonlinear_restoring", 3, displacements)):
@@ -151,10 +160,13 @@ def change_families(res: Residuals, margin: float = 0.05, times: FloatArray | No
         span = t[-1] - t[0]
         times = np.linspace(t[0] + margin * span, t[-1] - margin * span, CHANGE_TIMES)
     after = (t[:, None] >= times[None, :]).astype(float)
+    displacements = _displacements(res.model)
     for i in _targets(res):
         if target is not None and res.model.state_names[i] != target:
             continue
         for what, regressor in (("damping", x[:, i]), ("force", np.ones(len(t)))):
+            if what == "damping" and i in displacements:
+                continue
             yield Family("parameter_change", res.model.state_names[i],
                          [{"time": float(s), "what": what} for s in times],
                          _in_equation(i, after * regressor[:, None], n), n_parameters=2,
@@ -221,7 +233,7 @@ def wave_families(res: Residuals, alpha: float = 1e-4, max_zeta: float = 0.1) ->
     its equation-error spectrum over a smooth background; the term is the error band-passed
     about the peak (its coefficient is fitted)."""
     n = len(res.model.state_names)
-    for i in _targets(res):
+    for i in _dynamic_targets(res):
         if res.model.state_names[i] not in res.channels:
             continue
         error = res.error[:, i]
@@ -309,7 +321,7 @@ def unlisted_families(res: Residuals) -> Iterator[Family]:
     if not library:
         return
     columns = np.column_stack([column for _, column in library])
-    for i in _targets(res):
+    for i in _dynamic_targets(res):
         yield Family("unlisted", model.state_names[i],
                      [{"expression": name} for name, _ in library],
                      _in_equation(i, columns, len(model.state_names)), n_parameters=2)

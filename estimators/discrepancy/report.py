@@ -94,7 +94,7 @@ def markdown(diagnosis: Diagnosis, figures: Sequence[tuple[str, str]] = (),
     if diagnosis.mismatch is None:
         return "\n".join(parts)
     parts += _calibration(diagnosis) + _location(diagnosis) + _findings(diagnosis.findings) \
-        + _fit(diagnosis)
+        + _withdrawn(diagnosis.unconfirmed) + _fit(diagnosis)
     if figures:
         parts += ["## Figures", ""]
         for name, caption in figures:
@@ -156,6 +156,16 @@ def _findings(findings: Sequence[Finding]) -> list[str]:
         out.append(f"| {k} | {f.effect} | {f.target} | {_cell(_parameters(f))} | "
                    f"{f.confidence:.2f} | {f.improvement:.0%} | {_cell(f.explanation)} |")
     return out + [""]
+
+
+def _withdrawn(unconfirmed: Sequence[Finding]) -> list[str]:
+    """Terms the search accepted but the held-out predictions did not confirm."""
+    if not unconfirmed:
+        return []
+    names = ", ".join(f"`{f.effect}` on `{f.target}` ({_cell(_parameters(f))})"
+                      for f in unconfirmed)
+    return ["Withdrawn: " + names + ". Significant on the innovations but, refitted on the "
+            "first part, it did not improve the held-out predictions.", ""]
 
 
 def _fit(diagnosis: Diagnosis) -> list[str]:
