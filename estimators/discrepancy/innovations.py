@@ -30,8 +30,8 @@ FloatArray = NDArray[np.float64]
 #: Order of the autoregressive model of each channel's innovations: the unmodelled sea is
 #: coloured, so the filter's innovations are too; their prediction-error filter whitens them.
 AR_ORDER = 20
-#: The colour is the innovation spectrum's running median over this many Welch bins (about
-#: 0.7 rad/s at 10 Hz): broad sea colour is whitened, a narrow peak (an unmodelled
+#: The colour is the innovation spectrum's running median over this many Welch bins (0.12
+#: rad/s each at 10 Hz): broad sea colour is whitened, a narrow peak (an unmodelled
 #: oscillation, ``zeta`` up to about 0.1) is a model error and stays.
 BACKGROUND_BINS = 11
 
