@@ -33,8 +33,8 @@ the time one diagnosis takes on one core.
    times the spread of the derivative it belongs to (USV: the unmeasured sway speed held at zero;
    hydrofoil: the stiff heave-pitch model evaluated on smoothed 10 Hz states, and the sea), while
    an effect is sized at 0.3 of it. On the hovercraft, every state measured, it ranks no case
-   right either (2026-11-21, 5 % and 10 % noise). Its ranked-right rate is reported next to the diagnosis's on
-   the same cases, per noise level (``--with-20`` adds 20 % noise for both).
+   right either (2026-11-21, 5 % and 10 % noise). Its ranked-right rate is reported next to the
+   diagnosis's on the same cases, per noise level (``--with-20`` adds 20 % noise for both).
 
 3. Timing: a 10-minute record at 10 Hz of the USV with quadratic damping on r at 10 % noise,
    diagnosed in this process pinned to one CPU with one BLAS thread (target: 30 s); as a

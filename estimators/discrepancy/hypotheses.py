@@ -131,9 +131,9 @@ def state_families(res: Residuals) -> Iterator[Family]:
         if i in displacements:
             continue  # kinematics: geometry, exact but for a drift (the current above)
         sources = [s for s in _targets(res) if s != i and np.ptp(x[:, s]) > 0]
-        for effect, power, allowed in (("coupling", 1, sources),
-                                       ("nonlinear_restoring", 3, displacements)):
-            chosen = [s for s in sources if s in allowed]
+        restoring = [s for s in sources if s in displacements]
+        for effect, power, chosen in (("coupling", 1, sources),
+                                      ("nonlinear_restoring", 3, restoring)):
             if chosen:
                 columns = np.column_stack([x[:, s] ** power for s in chosen])
                 yield Family(effect, names[i], [{"source": names[s]} for s in chosen],
