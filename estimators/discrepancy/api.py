@@ -86,7 +86,9 @@ class Diagnosis:
     selection: Selection | None = field(default=None, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON document (see the issue's schema), with plain Python numbers."""
+        """The JSON document (see the issue's schema), with plain Python numbers; also
+        ``unconfirmed`` findings, the ``calibration`` and the ``noise_model`` (each force
+        equation's coloured forcing: correlation time, s, and std, state units per s)."""
         out = {"model": self.model, "mismatch": self.mismatch, "channels": self.channels,
                "windows": self.windows, "band": self.band,
                "findings": [_finding_dict(f) for f in self.findings], "fit": self.fit}
@@ -96,6 +98,11 @@ class Diagnosis:
             out["reason"] = self.reason
         if self.calibration:
             out["calibration"] = self.calibration
+        if self.residuals is not None and self.residuals.forcing:
+            names = self.residuals.model.state_names
+            out["noise_model"] = [{"equation": names[f.state], "correlation_time": f.tau,
+                                   "std": math.sqrt(f.variance)}
+                                  for f in self.residuals.forcing]
         return json.loads(json.dumps(out, default=_plain))
 
     def to_json(self, path: str | Path | None = None) -> str:
@@ -108,8 +115,8 @@ class Diagnosis:
         """A few lines for a terminal."""
         if self.mismatch is None:
             return f"{self.model}: cannot diagnose: {self.reason}"
-        withdrawn = [f"  withdrawn, no held-out improvement: {f.effect} on {f.target}"
-                     for f in self.unconfirmed]
+        withdrawn = [f"  withdrawn, not confirmed on held-out data: {f.effect} on {f.target} "
+                     f"(improvement {f.improvement:.0%})" for f in self.unconfirmed]
         if not self.mismatch:
             return "\n".join([f"{self.model}: no significant mismatch: the nominal model "
                               "explains the record", *withdrawn])

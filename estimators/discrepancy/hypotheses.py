@@ -230,8 +230,9 @@ def bias_term(res: Residuals, channel: str, b: float) -> FloatArray:
 # -- narrow-band motion ---------------------------------------------------------------------------
 def wave_families(res: Residuals, alpha: float = 1e-4, max_zeta: float = 0.1) -> Iterator[Family]:
     """A narrow-band process in one measured state's equation: a significant, narrow peak of
-    its equation-error spectrum over a smooth background; the term is the error band-passed
-    about the peak (its coefficient is fitted)."""
+    its equation-error spectrum over a smooth background, found again in each half of the
+    record (an unmodelled oscillation persists; a fluctuation of the sea's spectrum does
+    not); the term is the error band-passed about the peak (its coefficient is fitted)."""
     n = len(res.model.state_names)
     for i in _dynamic_targets(res):
         if res.model.state_names[i] not in res.channels:
@@ -239,7 +240,8 @@ def wave_families(res: Residuals, alpha: float = 1e-4, max_zeta: float = 0.1) ->
         error = res.error[:, i]
         peak = spectral_peak(error, res.dt)
         if peak is None or peak["p_value"] > alpha or peak["zeta"] > max_zeta \
-                or _at_natural_frequency(res, peak):
+                or _at_natural_frequency(res, peak) \
+                or not _in_both_halves(error, peak["omega"], res.dt, alpha):
             continue
         band = _band_pass(error, peak["omega"], max(peak["zeta"], peak["resolution"]), res.dt)
         column = np.append(band, band[-1])
@@ -261,22 +263,46 @@ def _at_natural_frequency(res: Residuals, peak: dict[str, float]) -> bool:
     return bool(np.any(light & (np.abs(peak["omega"] - frequency) <= reach)))
 
 
-def spectral_peak(x: FloatArray, dt: float, segment: float = 60.0) -> dict[str, float] | None:
-    """The most significant peak of the Welch spectrum of ``x`` over a running-median background:
-    ``omega`` (rad/s), ``zeta`` (from the half-power width), ``ratio`` (peak/background),
-    ``p_value`` (chi-square, Bonferroni over the frequencies), ``resolution`` (rad/s)."""
+def _in_both_halves(x: FloatArray, omega: float, dt: float, alpha: float) -> bool:
+    """Whether each half of ``x`` has a significant peak at ``omega`` (within one bin)."""
+    for half in (x[:len(x) // 2], x[len(x) // 2:]):
+        spectrum = _welch_over_background(half, dt)
+        if spectrum is None:
+            return False
+        w, psd, background, dof = spectrum
+        k = int(np.argmin(np.abs(w - omega)))
+        near = slice(max(k - 1, 0), k + 2)
+        if 3 * stats.chi2.sf((psd[near] / background[near]).max() * dof, dof) > alpha:
+            return False  # Bonferroni over the three bins
+    return True
+
+
+def _welch_over_background(x: FloatArray, dt: float, segment: float = 60.0
+                           ) -> tuple[FloatArray, FloatArray, FloatArray, float] | None:
+    """``(omega (rad/s), Welch spectrum, its running-median background, chi-square degrees of
+    freedom of a bin)`` of ``x`` with segments up to ``segment`` s; None if ``x`` is short."""
     nperseg = min(len(x) // 4, int(segment / dt))
     if nperseg < 32:
         return None
     f, psd = signal.welch(x, fs=1 / dt, nperseg=nperseg)
-    omega = 2 * np.pi * f
+    background = np.exp(signal.medfilt(np.log(psd + 1e-300), 2 * (len(psd) // 16) + 1))
+    dof = 2 * 1.8 * (2 * len(x) / nperseg - 1)  # Hann, half overlap
+    return 2 * np.pi * f, psd, background, dof
+
+
+def spectral_peak(x: FloatArray, dt: float, segment: float = 60.0) -> dict[str, float] | None:
+    """The most significant peak of the Welch spectrum of ``x`` over a running-median background:
+    ``omega`` (rad/s), ``zeta`` (from the half-power width), ``ratio`` (peak/background),
+    ``p_value`` (chi-square, Bonferroni over the frequencies), ``resolution`` (rad/s)."""
+    spectrum = _welch_over_background(x, dt, segment)
+    if spectrum is None:
+        return None
+    omega, psd, background, dof = spectrum
     usable = (omega > 0.15) & (omega < min(0.8 * np.pi / dt, MAX_WAVE_FREQUENCY))
     if usable.sum() < 10:
         return None
-    background = np.exp(signal.medfilt(np.log(psd + 1e-300), 2 * (len(psd) // 16) + 1))
     ratio = np.where(usable, psd / background, 0.0)
     k = int(np.argmax(ratio))
-    dof = 2 * 1.8 * (2 * len(x) / nperseg - 1)  # Hann, half overlap
     p_value = min(1.0, float(stats.chi2.sf(ratio[k] * dof, dof)) * int(usable.sum()))
     half = psd[k] / 2
     lo, hi = k, k
@@ -284,12 +310,12 @@ def spectral_peak(x: FloatArray, dt: float, segment: float = 60.0) -> dict[str, 
         lo -= 1
     while hi < len(psd) - 1 and psd[hi] > half:
         hi += 1
-    resolution = 2 * np.pi / (nperseg * dt)
+    resolution = float(omega[1] - omega[0])
     peak = _parabolic(omega, np.log(psd + 1e-300), k)
     # the Hann window's main lobe holds a pure line above half power over ~3 bins
     width = max(omega[hi] - omega[lo] - 2 * resolution, resolution / 2)
     return {"omega": float(peak), "zeta": float(width / (2 * peak)), "ratio": float(ratio[k]),
-            "p_value": p_value, "resolution": float(resolution)}
+            "p_value": p_value, "resolution": resolution}
 
 
 def _parabolic(x: FloatArray, y: FloatArray, k: int) -> float:

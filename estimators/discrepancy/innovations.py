@@ -60,6 +60,8 @@ class Innovations:
     :param K, H_raw, Phi: gains ``(T, n, m)``, output matrices ``(T, m, n)``, transitions.
     :param C: the smoother's gains ``P_k Phi_k' P_pred_{k+1}^-1`` ``(T - 1, n, n)``.
     :param ar: each channel's prediction-error filter (see ``AR_ORDER``), or None.
+    :param n_model: the model's states: the first ``n_model`` of the filter's ``n`` (the rest
+        are its forcing states, which candidate terms do not enter).
     """
 
     nu: FloatArray
@@ -73,11 +75,13 @@ class Innovations:
     Phi: FloatArray
     C: FloatArray
     ar: FloatArray | None = None
+    n_model: int | None = None
 
     @classmethod
-    def from_filter(cls, ekf: ExtendedKalmanFilter, run: FilterResult,
-                    dt: float) -> Innovations:
-        """From a single filter's offline run (``run.x_pred`` etc. with batch size 1)."""
+    def from_filter(cls, ekf: ExtendedKalmanFilter, run: FilterResult, dt: float,
+                    n_model: int | None = None) -> Innovations:
+        """From a single filter's offline run (``run.x_pred`` etc. with batch size 1) whose
+        first ``n_model`` states (default: all) are the model's."""
         n = len(run.state_names)
         x_pred, P_pred = run.x_pred[:, 0], run.P_pred[:, 0]
         H, _ = ekf._measurement_jacobian(x_pred)
@@ -93,7 +97,8 @@ class Innovations:
         P = run.P[:, 0, :n, :n]
         C = np.linalg.solve(P_pred[1:], Phi @ P[:-1]).transpose(0, 2, 1)
         out = cls(nu=nu, M=Phi @ IKH, Gamma=0.5 * dt * (Phi + np.eye(n)), PhiK=Phi @ K[:-1],
-                  H=L_inv @ H, L_inv=L_inv, K=K, H_raw=H, Phi=Phi, C=C, ar=ar)
+                  H=L_inv @ H, L_inv=L_inv, K=K, H_raw=H, Phi=Phi, C=C, ar=ar,
+                  n_model=n if n_model is None else n_model)
         out.nu = out._whiten(nu)
         return out
 
@@ -108,16 +113,22 @@ class Innovations:
 
     @property
     def shape(self) -> tuple[int, int, int]:
-        """``(T, m, n)``: steps, channels, states."""
+        """``(T, m, n)``: steps, channels, the filter's states."""
         return self.nu.shape[0], self.nu.shape[1], self.M.shape[1]
+
+    def _pad(self, w: FloatArray) -> FloatArray:
+        """A term in the model's equations ``(T, n_model, ...)`` as one in the filter's."""
+        extra = self.M.shape[1] - w.shape[1]
+        return np.pad(w, [(0, 0), (0, extra)] + [(0, 0)] * (w.ndim - 2)) if extra else w
 
     def smoothed_shift(self, w: FloatArray | None = None,
                        v: FloatArray | None = None) -> FloatArray:
         """How the smoothed states move ``(T, n)`` when the model gains the term ``w``
         ``(T, n)`` (state derivatives) and the channels the offset ``v`` ``(T, m)``: the
-        filter's shift (as in :meth:`response`), then the Rauch-Tung-Striebel recursion."""
+        filter's shift (as in :meth:`response`), then the Rauch-Tung-Striebel recursion;
+        the model's states only ``(T, n_model)``."""
         T, m, n = self.shape
-        w = np.zeros((T, n)) if w is None else w
+        w = np.zeros((T, n)) if w is None else self._pad(w)
         v = np.zeros((T, m)) if v is None else v
         before, after = np.zeros((T, n)), np.zeros((T, n))
         for k in range(T):
@@ -127,7 +138,7 @@ class Innovations:
         smoothed = after.copy()
         for k in range(T - 2, -1, -1):
             smoothed[k] = after[k] + self.C[k] @ (smoothed[k + 1] - before[k + 1])
-        return smoothed
+        return smoothed[:, :self.n_model]
 
     def response(self, w: FloatArray | None = None, v: FloatArray | None = None) -> FloatArray:
         """Whitened innovation change per unit coefficient ``(T, m, R)`` of ``R`` candidate
@@ -137,7 +148,7 @@ class Innovations:
         R = (w if w is not None else v).shape[2]  # type: ignore[union-attr]
         drive = np.zeros((T - 1, n, R))
         if w is not None:
-            drive += self.Gamma @ w[:-1]
+            drive += self.Gamma @ self._pad(w)[:-1]
         if v is not None:
             drive -= self.PhiK @ v[:-1]
         d = np.zeros((T, n, R))

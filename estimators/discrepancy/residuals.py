@@ -9,16 +9,23 @@ smoothed states follow the recording and the model's mistakes land in the *equat
 
 (``Phi``: one RK4 step of the nominal model). A term the model leaves out shows up in ``e`` as a
 function of the smoothed states and inputs, which is what the hypotheses are fitted to.
+
+The unmodelled sea or wind is coloured, and under closed-loop control a coloured forcing the
+filter takes for white biases every fit of a term that the controller correlates with it (the
+direct prediction-error method is consistent only with the right noise model). So the last pass
+gives each measured force equation a first-order Gauss-Markov forcing state, its correlation
+time and variance read off the first pass's equation errors (:func:`forcing_model`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
+from scipy import linalg, signal
 
 from marine_envs.effects import rk4
 from marine_envs.models import VehicleModel
@@ -33,6 +40,9 @@ ANGLES = ("psi", "phi", "theta", "psi_lf")
 #: Unmeasured states get this share of their guessed process noise: they follow the model, so a
 #: model error cannot hide in them and shows in the equations of the measured states instead.
 FOLLOW_MODEL = 1e-3
+#: Share of a force equation's error variance left to white process noise once it has a
+#: Gauss-Markov forcing state (keeps the filter from trusting the forcing model blindly).
+WHITE_SHARE = 0.1
 
 
 @dataclass
@@ -47,6 +57,7 @@ class Residuals:
     :param noise: white-noise standard deviation of each channel, estimated from the data.
     :param observable: per state, whether the measured channels see it.
     :param innovations: the last pass's filter innovations and their sensitivities.
+    :param forcing: the last pass's coloured forcing of the force equations (noise model).
     """
 
     model: VehicleModel
@@ -62,6 +73,7 @@ class Residuals:
     observable: NDArray[np.bool_]
     substeps: int = 1
     innovations: Innovations | None = None
+    forcing: tuple[Forcing, ...] = ()
 
     @property
     def midpoint(self) -> FloatArray:
@@ -137,8 +149,9 @@ def _output_matrix(model: VehicleModel, channels: tuple[str, ...]) -> FloatArray
 def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Residuals:
     """Smooth the record with the nominal model and compute the equation errors.
 
-    The process noise of the second pass is the variance of the first pass's equation errors, so
-    the smoother follows the data wherever the model is wrong.
+    The process noise of each later pass is fitted to the previous pass's equation errors, so
+    the smoother follows the data wherever the model is wrong; the last pass models the
+    forcing of the measured force equations as coloured (module doc).
     """
     channels = recording.measured_names
     y = recording.measurements.copy()
@@ -150,21 +163,100 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
     n = len(model.state_names)
     substeps = substeps_for(model, dt)
     measured = np.array([name in channels for name in model.state_names])
-    Q = _initial_process_noise(model, y, u, channels, dt)
-    Q = np.diag(np.where(measured, Q, Q * FOLLOW_MODEL))
+    q = _initial_process_noise(model, y, u, channels, dt)
+    q = np.where(measured, q, q * FOLLOW_MODEL)
     x0, P0 = _initial_state(model, y, channels, noise)
-    for _ in range(passes):
-        ekf = ExtendedKalmanFilter.from_model(model, dt, measured=channels, Q=Q,
-                                              R=np.diag(noise**2), x0=x0, P0=P0,
-                                              substeps=substeps)
+    forcing: list[Forcing] = []
+    for k in range(passes):
+        ekf = _filter(model, dt, channels, q, noise, x0, P0, substeps, forcing)
         smoothed = ekf.smooth(u, y)
         x = smoothed.x[:, 0, :n]
         error = equation_error(model, x, u, dt, substeps)
-        Q = np.diag(np.where(measured, np.maximum(np.var(error, axis=0), 1e-12 * (
-            np.var(x, axis=0) + 1e-12)), np.diag(Q) / dt**2 * FOLLOW_MODEL) * dt**2)
+        if k == passes - 1:
+            break
+        variance = np.maximum(np.var(error, axis=0), 1e-12 * (np.var(x, axis=0) + 1e-12))
+        q = np.where(measured, variance * dt**2, q * FOLLOW_MODEL)
+        if k == passes - 2:
+            forcing = forcing_model(model, x, u, error, measured, dt)
+            for f in forcing:
+                q[f.state] *= WHITE_SHARE
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
                      error, noise, observable_states(model, channels), substeps,
-                     Innovations.from_filter(ekf, smoothed.filtered, dt))
+                     Innovations.from_filter(ekf, smoothed.filtered, dt, n), tuple(forcing))
+
+
+@dataclass(frozen=True)
+class Forcing:
+    """A first-order Gauss-Markov forcing in state ``state``'s equation:
+    ``zeta' = -zeta / tau + white``, stationary ``variance`` (state units per s, squared)."""
+
+    state: int
+    tau: float
+    variance: float
+
+
+def forcing_model(model: VehicleModel, x: FloatArray, u: FloatArray, error: FloatArray,
+                  measured: NDArray[np.bool_], dt: float) -> list[Forcing]:
+    """A Gauss-Markov forcing for each measured force equation (not the kinematics), fitted to
+    what of its equation error is not a function of the present state and input (a missing
+    term is; it must stay a model error, not become forcing): its variance, and its
+    correlation time ``1 / omega_c`` where its spectrum falls to half its peak (a sea's
+    forcing is low-pass)."""
+    A, B, E = model.linearize()
+    exogenous = error - _state_functions(x[:-1], u[:-1]) @ np.linalg.lstsq(
+        _state_functions(x[:-1], u[:-1]), error, rcond=None)[0]
+    out = []
+    for i in np.flatnonzero(measured):
+        if A[i, i] == 0 and not B[i].any() and not E[i].any():
+            continue  # a kinematic equation: nothing forces it
+        e = exogenous[:, i]
+        f, psd = signal.welch(e, fs=1 / dt, nperseg=max(len(e) // 4, 8))
+        omega, level = 2 * np.pi * f[1:], psd[1:]
+        peak = int(np.argmax(level))
+        below = np.flatnonzero(level[peak:] < level[peak] / 2)
+        corner = omega[peak + below[0]] if below.size else omega[-1]
+        out.append(Forcing(int(i), float(1 / corner), float((1 - WHITE_SHARE) * np.var(e))))
+    return out
+
+
+def _state_functions(x: FloatArray, u: FloatArray) -> FloatArray:
+    """Regressors ``(T, k)``: a constant, and each state and input, its ``|.| .`` and cube
+    (scaled to unit spread so that the least squares is well conditioned)."""
+    z = np.concatenate([x, u], axis=1)
+    z = (z - z.mean(axis=0)) / np.maximum(z.std(axis=0), 1e-12)
+    return np.concatenate([np.ones((len(z), 1)), z, z * np.abs(z), z**3], axis=1)
+
+
+def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatArray,
+            noise: FloatArray, x0: FloatArray, P0: FloatArray, substeps: int,
+            forcing: Sequence[Forcing]) -> ExtendedKalmanFilter:
+    """The nominal model's filter with per-step process noise ``q`` on the states and, after
+    them, the ``forcing`` states (zero mean, their stationary variance as prior)."""
+    if not forcing:
+        return ExtendedKalmanFilter.from_model(model, dt, measured=channels, Q=np.diag(q),
+                                               R=np.diag(noise**2), x0=x0, P0=P0,
+                                               substeps=substeps)
+    n = len(model.state_names)
+    rows = np.array([f.state for f in forcing])
+    tau = np.array([f.tau for f in forcing])
+    variance = np.array([f.variance for f in forcing])
+    outputs = [model.output_names.index(c) for c in channels]
+
+    def f(z: FloatArray, u: FloatArray, _theta: FloatArray) -> FloatArray:
+        x_dot = model.rhs(z[:, :n], u)
+        x_dot[:, rows] += z[:, n:]
+        return np.concatenate([x_dot, -z[:, n:] / tau], axis=1)
+
+    def h(z: FloatArray) -> FloatArray:
+        return model.output(z[:, :n])[:, outputs]
+
+    decay = np.exp(-2 * dt / tau)
+    Q = np.diag(np.concatenate([q, variance * (1 - decay)]))
+    names = [f"forcing_{model.state_names[i]}" for i in rows]
+    return ExtendedKalmanFilter(f, h, dt=dt, Q=Q, R=np.diag(noise**2), n_inputs=len(
+        model.input_names), state_names=(*model.state_names, *names), measurement_names=channels,
+        x0=np.concatenate([x0, np.zeros(len(rows))]),
+        P0=linalg.block_diag(P0, np.diag(variance)), substeps=substeps)
 
 
 def _initial_state(model: VehicleModel, y: FloatArray, channels: tuple[str, ...],
