@@ -14,7 +14,8 @@ The unmodelled sea or wind is coloured, and under closed-loop control a coloured
 filter takes for white biases every fit of a term that the controller correlates with it (the
 direct prediction-error method is consistent only with the right noise model). So the last pass
 gives each measured force equation a first-order Gauss-Markov forcing state, its correlation
-time and variance read off the first pass's equation errors (:func:`forcing_model`).
+time and variance read off the part of the first pass's equation errors that is not a function
+of the state and input (:func:`forcing_model`).
 """
 
 from __future__ import annotations
@@ -41,7 +42,8 @@ ANGLES = ("psi", "phi", "theta", "psi_lf")
 #: model error cannot hide in them and shows in the equations of the measured states instead.
 FOLLOW_MODEL = 1e-3
 #: Share of a force equation's error variance left to white process noise once it has a
-#: Gauss-Markov forcing state (keeps the filter from trusting the forcing model blindly).
+#: Gauss-Markov forcing state, and taken from the forcing's (keeps the filter from trusting the
+#: forcing model blindly).
 WHITE_SHARE = 0.1
 
 
