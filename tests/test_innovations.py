@@ -3,8 +3,8 @@
 import numpy as np
 from scipy import signal
 
-from estimators.discrepancy.hypotheses import _displacements
 from estimators.discrepancy.innovations import AR_ORDER, Innovations, _ar_fit
+from estimators.discrepancy.residuals import displacements
 from estimators.ekf import ExtendedKalmanFilter
 from marine_envs.models import get_model
 from marine_envs.synthetic import synthesize
@@ -53,6 +53,6 @@ def test_whitening_removes_broad_colour_but_keeps_a_narrow_peak():
 
 def test_restoring_terms_depend_on_positions_and_angles():
     names = {m: get_model(m).state_names for m in ("usv", "hovercraft")}
-    assert {names["usv"][i] for i in _displacements(get_model("usv"))} == {"psi", "phi"}
-    assert {names["hovercraft"][i] for i in _displacements(get_model("hovercraft"))} == \
+    assert {names["usv"][i] for i in displacements(get_model("usv"))} == {"psi", "phi"}
+    assert {names["hovercraft"][i] for i in displacements(get_model("hovercraft"))} == \
         {"north", "east", "psi"}

@@ -21,9 +21,8 @@ from numpy.typing import NDArray
 from scipy import signal, stats
 
 from marine_envs.effects import Effect, applied_inputs
-from marine_envs.models import VehicleModel
 
-from .residuals import Residuals, _output_matrix
+from .residuals import Residuals, _output_matrix, displacements
 
 FloatArray = NDArray[np.float64]
 #: Parameter-change times tried: this many over the record (then refined on the final fit).
@@ -101,8 +100,8 @@ def _targets(res: Residuals) -> list[int]:
 
 def _dynamic_targets(res: Residuals) -> list[int]:
     """Observable states whose equations carry forces (not kinematics)."""
-    displacements = _displacements(res.model)
-    return [i for i in _targets(res) if i not in displacements]
+    kinematic = displacements(res.model)
+    return [i for i in _targets(res) if i not in kinematic]
 
 
 def _in_equation(i: int, columns: FloatArray, n: int) -> FloatArray:
@@ -117,7 +116,7 @@ def state_families(res: Residuals) -> Iterator[Family]:
     coupling and cubic restoring in the force (non-kinematic) equations."""
     x, names = _states(res), res.model.state_names
     n = len(names)
-    displacements = _displacements(res.model)
+    kinematic = displacements(res.model)
     for i in _targets(res):
         xi = x[:, i]
         singles = [("current", np.ones_like(xi), {}, "b"),
@@ -125,28 +124,19 @@ def state_families(res: Residuals) -> Iterator[Family]:
                    ("quadratic_damping", xi * np.abs(xi), {}, "c"),
                    ("nonlinear_damping", xi**3, {"form": "cubic"}, "c")]
         for effect, column, fixed, name in singles:
-            if effect == "current" or (np.ptp(column) > 0 and i not in displacements):
+            if effect == "current" or (np.ptp(column) > 0 and i not in kinematic):
                 yield Family(effect, names[i], [fixed], _in_equation(i, column[:, None], n),
                              coefficient=name)
-        if i in displacements:
+        if i in kinematic:
             continue  # kinematics: geometry, exact but for a drift (the current above)
         sources = [s for s in _targets(res) if s != i and np.ptp(x[:, s]) > 0]
-        restoring = [s for s in sources if s in displacements]
+        restoring = [s for s in sources if s in kinematic]
         for effect, power, chosen in (("coupling", 1, sources),
                                       ("nonlinear_restoring", 3, restoring)):
             if chosen:
                 columns = np.column_stack([x[:, s] ** power for s in chosen])
                 yield Family(effect, names[i], [{"source": names[s]} for s in chosen],
                              _in_equation(i, columns, n), n_parameters=2)
-
-
-def _displacements(model: VehicleModel) -> set[int]:
-    """The states a restoring force can depend on: positions and angles, whose equations are
-    kinematic (nothing damps them, no input or disturbance drives them). A cubic in a
-    velocity is damping, not restoring."""
-    A, B, E = model.linearize()
-    return {i for i in range(A.shape[0])
-            if A[i, i] == 0 and not B[i].any() and not E[i].any()}
 
 
 def change_families(res: Residuals, margin: float = 0.05, times: FloatArray | None = None,
@@ -160,12 +150,12 @@ def change_families(res: Residuals, margin: float = 0.05, times: FloatArray | No
         span = t[-1] - t[0]
         times = np.linspace(t[0] + margin * span, t[-1] - margin * span, CHANGE_TIMES)
     after = (t[:, None] >= times[None, :]).astype(float)
-    displacements = _displacements(res.model)
+    kinematic = displacements(res.model)
     for i in _targets(res):
         if target is not None and res.model.state_names[i] != target:
             continue
         for what, regressor in (("damping", x[:, i]), ("force", np.ones(len(t)))):
-            if what == "damping" and i in displacements:
+            if what == "damping" and i in kinematic:
                 continue
             yield Family("parameter_change", res.model.state_names[i],
                          [{"time": float(s), "what": what} for s in times],

@@ -118,6 +118,15 @@ def white_noise_std(y: FloatArray) -> FloatArray:
     return np.maximum(mad / np.sqrt(70.0), 1e-6 * (np.std(y, axis=0) + 1e-12))
 
 
+def displacements(model: VehicleModel) -> set[int]:
+    """The states whose equations are kinematic (nothing damps them, no input or disturbance
+    drives them): positions and angles. Only they can carry a restoring force, and their
+    equations take no force (``hypotheses``) and no sea forcing (:func:`forcing_model`)."""
+    A, B, E = model.linearize()
+    return {i for i in range(A.shape[0])
+            if A[i, i] == 0 and not B[i].any() and not E[i].any()}
+
+
 def observable_states(model: VehicleModel, channels: tuple[str, ...]) -> NDArray[np.bool_]:
     """Per state, whether it lies in the observable subspace of the model linearised at its
     nominal point, measured through ``channels``."""
@@ -204,13 +213,13 @@ def forcing_model(model: VehicleModel, x: FloatArray, u: FloatArray, error: Floa
     term is; it must stay a model error, not become forcing): its variance, and its
     correlation time ``1 / omega_c`` where its spectrum falls to half its peak (a sea's
     forcing is low-pass)."""
-    A, B, E = model.linearize()
-    exogenous = error - _state_functions(x[:-1], u[:-1]) @ np.linalg.lstsq(
-        _state_functions(x[:-1], u[:-1]), error, rcond=None)[0]
+    regressors = _state_functions(x[:-1], u[:-1])
+    exogenous = error - regressors @ np.linalg.lstsq(regressors, error, rcond=None)[0]
+    kinematic = displacements(model)
     out = []
     for i in np.flatnonzero(measured):
-        if A[i, i] == 0 and not B[i].any() and not E[i].any():
-            continue  # a kinematic equation: nothing forces it
+        if i in kinematic:
+            continue  # nothing forces a kinematic equation
         e = exogenous[:, i]
         f, psd = signal.welch(e, fs=1 / dt, nperseg=max(len(e) // 4, 8))
         omega, level = 2 * np.pi * f[1:], psd[1:]
