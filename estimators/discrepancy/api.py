@@ -28,12 +28,22 @@ from marine_envs.effects import Effect
 from marine_envs.models import VehicleModel, get_model
 from marine_envs.recording import Recording, read_recording
 
-from .diagnosis import DiagnosisConfig, Evaluator, Fitted, Scored, Selection, fit_findings, select
+from .diagnosis import (
+    DiagnosisConfig,
+    Evaluator,
+    Fitted,
+    Scored,
+    Selection,
+    fit_findings,
+    gain_test,
+    select,
+)
 from .explain import explain
 from .residuals import Residuals, estimate, white_noise_std
 from .rollout import Rollouts
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 #: Below these a recording is too short to say anything.
 MIN_SAMPLES, MIN_DURATION = 300, 60.0
 #: A channel moves "beyond its noise" when its spread exceeds this many noise deviations.
@@ -171,8 +181,8 @@ def diagnose(recording: Recording | str | Path, model: str | VehicleModel | None
                           residuals=residuals, rollouts=rollouts, selection=selection,
                           findings=findings)
     _locate(diagnosis)
-    _validate(diagnosis)
-    _confirm(diagnosis)
+    _validate(diagnosis, config)
+    _confirm(diagnosis, config)
     return diagnosis
 
 
@@ -298,9 +308,10 @@ def _finding(scored: Scored, residuals: Residuals) -> Finding:
                    explain(effect, scored, residuals))
 
 
-def _validate(diagnosis: Diagnosis) -> None:
+def _validate(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
     """Held-out multi-step prediction errors per channel before and after the findings, the
-    findings refitted on the first part of the record only; each term alone and all together."""
+    findings refitted on the first part of the record only; each term alone and all together;
+    and whether each term predicts the held-out part's innovations (:func:`_held_out_p`)."""
     ro, selection, res = diagnosis.rollouts, diagnosis.selection, diagnosis.residuals
     assert ro is not None and selection is not None and res is not None
     rows = np.arange(len(res.time)) < int(ro.fit_fraction * len(res.time))
@@ -308,9 +319,10 @@ def _validate(diagnosis: Diagnosis) -> None:
         if selection.findings else []
     effects, forcing, shift = findings_model(res, fitted)
     before = ro.errors([])
-    for scored, term in zip(selection.findings, fitted, strict=True):
+    for k, (scored, term) in enumerate(zip(selection.findings, fitted, strict=True)):
         alone = ro.errors(*findings_model(res, [term]))
         scored.alone = round(float(ro.improvement(before, alone)), 4)
+        scored.held_out_p = _held_out_p(res, fitted, k, ~rows, config.confirm_block)
     selection.combined_improvement = float(ro.improvement(before,
                                                           ro.errors(effects, forcing, shift)))
     for finding, scored in zip(diagnosis.findings, selection.findings, strict=True):
@@ -328,20 +340,33 @@ def _validate(diagnosis: Diagnosis) -> None:
     }
 
 
-def _confirm(diagnosis: Diagnosis) -> None:
+def _held_out_p(res: Residuals, fitted: Sequence[Fitted], k: int, held_out: BoolArray,
+                block: float) -> float:
+    """One-sided p-value that term ``k``, fitted on the first part with the others, predicts
+    the held-out part's whitened innovations (those left by the others): the search's test
+    (:func:`.diagnosis.gain_test`) on data no fit has seen, over ``block``-s blocks."""
+    nu = res.innovations.nu - sum((f.response for j, f in enumerate(fitted) if j != k),
+                                  np.zeros_like(res.innovations.nu))
+    nu = nu[held_out]
+    return gain_test(nu, nu - fitted[k].response[held_out], int(round(block / res.dt)))[1]
+
+
+def _confirm(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
     """Withdraw the findings whose own term, refitted on the first part, does not improve the
-    held-out predictions: the in-sample evidence was the sea's colour or the noise, not a term
-    the data repeat. They are kept under ``unconfirmed``; the rest are validated again."""
+    held-out predictions or does not predict the held-out innovations at level ``alpha``: the
+    search's evidence was the sea's colour or the noise, not a term the data repeat. They are
+    kept under ``unconfirmed``; the rest are validated again."""
     selection = diagnosis.selection
     assert selection is not None
-    withdrawn = [k for k, s in enumerate(selection.findings) if s.alone <= 0]
+    withdrawn = [k for k, s in enumerate(selection.findings)
+                 if s.alone <= 0 or s.held_out_p > config.alpha]
     if not withdrawn:
         return
     diagnosis.unconfirmed += [diagnosis.findings[k] for k in withdrawn]
     selection.findings = [s for k, s in enumerate(selection.findings) if k not in withdrawn]
     diagnosis.findings = [f for k, f in enumerate(diagnosis.findings) if k not in withdrawn]
     diagnosis.mismatch = bool(diagnosis.findings)
-    _validate(diagnosis)
+    _validate(diagnosis, config)
 
 
 def findings_model(res: Residuals, fitted: Sequence[Fitted]

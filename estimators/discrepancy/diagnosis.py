@@ -8,7 +8,7 @@ thus predicted by a fit that never saw it, so a grid of delays or a library of p
 for its freedom, and the whole record validates.
 
 The held-out reduction of the squared innovations is tested over short blocks (a
-self-normalised one-sided z-test, see :func:`_gain_test`) and the p-value multiplied by the
+self-normalised one-sided z-test, see :func:`gain_test`) and the p-value multiplied by the
 number of families tried (Bonferroni). The best significant family becomes a
 finding and the search repeats with it in the model, until nothing significant is left. The
 findings are then refitted jointly on the whole record (backfitting).
@@ -43,11 +43,14 @@ class DiagnosisConfig:
 
     :param folds: contiguous cross-validation blocks.
     :param block: length of the significance test's blocks, s.
-    :param alpha: family-wise significance level of a finding.
+    :param alpha: significance level of a finding: family-wise in the search, and again on
+        the held-out part (one pre-set hypothesis there).
     :param max_findings: at most this many effects are reported.
     :param fit_fraction: the reported validation fits on this first part of the record and
         predicts the rest.
     :param horizon, stride: that validation's prediction horizon and start spacing, s.
+    :param confirm_block: block length of the held-out confirmation's test, s (shorter than
+        ``block``: the held-out part is short and its innovations are whitened).
     """
 
     folds: int = 5
@@ -57,6 +60,7 @@ class DiagnosisConfig:
     fit_fraction: float = 0.7
     horizon: float = 3.0
     stride: float = 0.5
+    confirm_block: float = 5.0
 
 
 @dataclass
@@ -93,6 +97,7 @@ class Scored:
     p_value: float  # Bonferroni-corrected
     confidence: float = 0.0
     alone: float = 0.0  # validation improvement of this term alone (set by the api)
+    held_out_p: float = 0.0  # does it, fitted on the first part, predict the rest? (by the api)
 
     @property
     def effect(self) -> Effect:
@@ -229,7 +234,7 @@ def _score(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], before:
     if not np.any(np.abs(G) > 1e-9):
         return None  # the measured channels do not see this term
     after = evaluator.cross_validate(accepted, G, family.free)
-    t, p = _gain_test(before, after, int(round(config.block / res.dt)))
+    t, p = gain_test(before, after, int(round(config.block / res.dt)))
     sigma2 = float(np.mean(before**2))  # per channel and sample
     b, a = float(np.sum(before**2)), float(np.sum(after**2))
     fitted = fit_member(res, evaluator, accepted, family, G)
@@ -332,7 +337,7 @@ def _parabola(values: FloatArray, sse: FloatArray, r: int,
     return float(v[k]), float(abs(v[-1] - v[0]) / 2)
 
 
-def _gain_test(before: FloatArray, after: FloatArray, block: int) -> tuple[float, float]:
+def gain_test(before: FloatArray, after: FloatArray, block: int) -> tuple[float, float]:
     """One-sided test that the held-out correction ``D = before - after`` ``(T, m)`` predicts
     the innovations ``before``: ``z = sum D.before / sqrt(sum_b (sum D.after)^2)`` over short
     contiguous blocks ``b``. Under the null the innovations are noise independent of ``D``

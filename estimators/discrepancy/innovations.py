@@ -48,6 +48,16 @@ def _ar_fit(x: FloatArray, order: int, segment: int = 512) -> FloatArray:
     return np.concatenate([[1.0], -a])
 
 
+def _moving_average(a: FloatArray, x: FloatArray) -> FloatArray:
+    """``sum_i a_i x_{k-i}`` along axis 0 from rest: ``lfilter(a, [1], x, axis=0)`` as a few
+    whole-array sums (lfilter runs an FIR column by column, slow for the many columns of
+    :meth:`Innovations.response`)."""
+    out = a[0] * x
+    for lag in range(1, min(len(a), len(x))):
+        out[lag:] += a[lag] * x[:-lag]
+    return out
+
+
 @dataclass
 class Innovations:
     """Whitened innovations ``nu`` ``(T, m)`` and the filter's closed loop.
@@ -108,7 +118,7 @@ class Innovations:
             return x
         out = np.empty_like(x)
         for j, a in enumerate(self.ar):
-            out[:, j] = signal.lfilter(a, [1.0], x[:, j], axis=0)
+            out[:, j] = _moving_average(a, x[:, j])
         return out
 
     @property
