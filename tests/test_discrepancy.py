@@ -57,7 +57,7 @@ def test_no_confident_finding_without_an_effect(vehicle, seed):
 
 def test_a_finding_the_held_out_part_does_not_repeat_is_withdrawn():
     # effect-free, but the search finds "less yaw damping" (p = 0.009 after Bonferroni): fitted
-    # on the first 70 %, it predicts the held-out innovations no better than chance (p = 0.04)
+    # on the first 70 %, it does not predict the held-out innovations (p = 0.04 > alpha = 0.01)
     diagnosis = diagnose(synthesize("usv", seed=102, noise=0.05))
     assert diagnosis.mismatch is False and not diagnosis.findings
     assert [(f.effect, f.target) for f in diagnosis.unconfirmed] == [("linear_damping", "r")]

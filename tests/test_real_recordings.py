@@ -1,5 +1,6 @@
 """The measured recordings shipped in marine_envs/data/real (written by
-examples/convert_real_data.py): format, licences, and the physics they are known to contain."""
+examples/convert_real_data.py): format, licences, the physics they are known to contain, and
+what the mismatch diagnosis says of them."""
 
 from __future__ import annotations
 
@@ -215,3 +216,29 @@ def test_hovercraft_params_bring_the_model_to_the_lab_craft_scale(hover):
     # damping is too stiff for RK4 at the lab craft's 11 rad/s)
     lcac = rk4(get_model("hovercraft"), x0 * [1, 1, 0, 1, 1, 1], hover.inputs[1:])
     assert np.hypot(lcac[:, 0], lcac[:, 1]).max() > 4 * speed.max()
+
+
+# -- the diagnosis on them (the README's worked examples) ---------------------------------------
+def test_kvlcc2_diagnosis_finds_the_large_swings_decay_faster_and_validates(tmp_path):
+    from agents.cli import main
+
+    out, report = tmp_path / "kvlcc2.json", tmp_path / "report"
+    assert main(["diagnose", str(KVLCC2), "--json", str(out), "--report", str(report)]) == 0
+    saved = json.loads(out.read_text())
+    assert saved["mismatch"] is True
+    top = saved["findings"][0]
+    assert (top["effect"], top["target"], top["parameters"]["what"]) == (
+        "parameter_change", "p", "damping")
+    # less damping after the first swings (c > 0 in p' = ... + c p): the linear model's single
+    # damping is too low for the large early swings and too high for the tail
+    assert 5.0 < top["parameters"]["time"] < 20.0 and top["parameters"]["c"] > 0
+    assert saved["fit"]["improvement"] >= 0.2
+    assert (report / "report.md").is_file() and len(list(report.glob("*.png"))) >= 3
+
+
+def test_hovercraft_runs_are_refused_as_too_short_with_the_reason(hover):
+    from estimators.discrepancy import diagnose
+
+    diagnosis = diagnose(hover)
+    assert diagnosis.mismatch is None and "too short" in diagnosis.reason
+    assert diagnosis.to_dict()["reason"] == diagnosis.reason
