@@ -159,6 +159,26 @@ def _diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train(args: argparse.Namespace) -> int:
+    from .sb3 import train
+
+    result = train(args.env_id, args.algo, args.estimator, args.timesteps, Path(args.out),
+                   args.seed, args.n_envs, args.backend, progress_bar=not args.quiet)
+    print(f"trained {result.timesteps} steps in {result.wall_seconds:.1f} s "
+          f"({result.steps_per_second:.0f} steps/s); saved to {result.out}")
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from .sb3 import evaluate
+
+    result = evaluate(Path(args.dir), args.episodes, args.seed)
+    print(f"return over {result['episodes']} episodes (seeds {result['seed']}.."
+          f"{result['seed'] + result['episodes'] - 1}): {result['mean_return']:.1f} "
+          f"± {result['std_return']:.1f}")
+    return 0
+
+
 def _read_params(path: str) -> dict[str, float]:
     """The ``--params`` file: a JSON object of parameter names to numbers."""
     try:
@@ -295,6 +315,34 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose.add_argument("--report", metavar="DIR",
                           help="write report.md, its PNG figures and diagnosis.json into DIR")
     diagnose.set_defaults(run=_diagnose)
+
+    train = commands.add_parser(
+        "train", help="train a Stable-Baselines3 agent (PPO, SAC, TD3, A2C) on an environment",
+        description="Train an SB3 agent on the native batched environment, optionally behind "
+                    "a state estimator. Hyperparameters per vehicle and algorithm come from "
+                    "agents/hyperparams.yaml (RL-Zoo style); writes model.zip, config.json, "
+                    "vecnormalize.pkl (if normalised) and checkpoints/ into --out.")
+    train.add_argument("env_id", help="environment id, e.g. marine_envs/USV-v0")
+    train.add_argument("--algo", default="ppo", help="ppo, sac, td3 or a2c (default ppo)")
+    train.add_argument("--estimator", help="kf or ekf between the sensors and the agent "
+                                           "(default: the agent sees the sensors)")
+    train.add_argument("--timesteps", type=int,
+                       help="environment steps (default: the YAML's n_timesteps)")
+    train.add_argument("--n-envs", type=int, help="boats stepped together (default: the YAML's)")
+    train.add_argument("--backend", default="native",
+                       help="native (our batched env) or dummy (SB3's DummyVecEnv)")
+    train.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    train.add_argument("--out", required=True, metavar="DIR", help="output directory")
+    train.add_argument("--quiet", action="store_true", help="no progress bar")
+    train.set_defaults(run=_train)
+
+    evaluate = commands.add_parser(
+        "evaluate", help="evaluate an agent 'marine train' saved: returns over seeded episodes")
+    evaluate.add_argument("dir", help="the directory 'marine train --out' wrote")
+    evaluate.add_argument("--episodes", type=int, default=5, help="episodes (default 5)")
+    evaluate.add_argument("--seed", type=int, default=0,
+                          help="first episode's seed; the others follow (default 0)")
+    evaluate.set_defaults(run=_evaluate)
 
     envs = commands.add_parser("envs", help="list the environments with their spaces")
     envs.set_defaults(run=_envs)

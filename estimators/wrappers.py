@@ -22,7 +22,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from gymnasium.vector.utils import batch_space
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from .base import Estimator
 
@@ -126,6 +126,21 @@ class VectorEstimatorWrapper(VectorWrapper):
         self._restarting = np.asarray(terminated) | np.asarray(truncated)
         estimate, info = self._correct(obs, info)
         return estimate, reward, terminated, truncated, info
+
+    def restart(self, idx: NDArray[np.intp]) -> tuple[np.ndarray, np.ndarray]:
+        """The environment's :meth:`~marine_envs.envs.base.MarineVectorEnv.restart` of boats
+        ``idx``, their filters restarted on its first measurements: their estimates
+        ``(len(idx), n)`` and the valid channels."""
+        idx = np.asarray(idx, dtype=np.intp)
+        y_idx, valid_idx = self.env.restart(idx)
+        est = self.estimator
+        est.reset(self.x0, self.P0, idx=idx)
+        y = np.zeros((self.num_envs, y_idx.shape[1]))
+        mask = np.zeros(y.shape, dtype=bool)  # the other filters see no data
+        y[idx], mask[idx] = y_idx, valid_idx
+        est.update(y, mask)
+        self._restarting[idx] = False  # restarted already, not again on the next step
+        return est.x[idx].astype(np.float32), valid_idx
 
     def _correct(self, obs: np.ndarray, info: dict[str, Any]):
         est = self.estimator

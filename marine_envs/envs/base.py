@@ -8,6 +8,7 @@ contract 2: observations are sensor outputs, ``info["state"]`` is the true state
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -17,6 +18,7 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
+from numpy.typing import NDArray
 
 from .core import Simulator
 from .rendering import TimeSeriesRenderer
@@ -166,6 +168,23 @@ class MarineVectorEnv(VectorEnv):
         self._done = terminated | truncated
         obs = sim.measure().astype(np.float32)
         return obs, reward, terminated, truncated, self._info()
+
+    def restart(self, idx: NDArray[np.intp]) -> tuple[np.ndarray, np.ndarray]:
+        """Start new episodes of boats ``idx`` now rather than on the next step (the
+        same-step reset SB3 expects); their episode generators carry on, as a single env's
+        do across resets. Returns their first measurements ``(len(idx), m)`` and the valid
+        channels. Measuring is batched, so they come from a copy of the sensor chain (the
+        other boats' sensors must not advance); the restarted boats' own chain then takes
+        its first sample one step late: statistically the same, not the same draws."""
+        idx = np.asarray(idx, dtype=np.intp)
+        self.sim.reset(idx, [self._rngs[i] for i in idx])
+        self._done[idx] = False
+        sensors, self.sim.sensors = self.sim.sensors, copy.deepcopy(self.sim.sensors)
+        try:
+            y, valid = self.sim.measure(), self.sim.sensors.valid
+        finally:
+            self.sim.sensors = sensors
+        return y[idx].astype(np.float32), np.broadcast_to(valid, y.shape)[idx]
 
     def _info(self) -> dict[str, Any]:
         sim, m = self.sim, self._mask

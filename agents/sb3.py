@@ -1,0 +1,361 @@
+"""Train and evaluate Stable-Baselines3 agents on the marine environments.
+
+SB3 trains on the native batched environment through :class:`SB3VecEnv` (or, with
+``backend="dummy"``, on SB3's ``DummyVecEnv`` of single environments), optionally behind a
+state estimator. Hyperparameters come from ``agents/hyperparams.yaml`` (RL-Zoo style).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import importlib.util
+import json
+import math
+import pickle
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
+from stable_baselines3 import A2C, PPO, SAC, TD3
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import CheckpointCallback
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, VecNormalize
+from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
+
+import marine_envs
+
+from .evaluation import run_episode
+
+ALGOS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C}
+ESTIMATORS = (None, "kf", "ekf")
+BACKENDS = ("native", "dummy")
+HYPERPARAMS = Path(__file__).with_name("hyperparams.yaml")
+#: Algorithms that learn from fresh rollouts: their returns, not only observations, are scaled.
+ON_POLICY = ("ppo", "a2c")
+
+
+# -- validation and hyperparameters ---------------------------------------------------------
+
+def _check_choice(name: str, value: Any, choices: Sequence[Any]) -> None:
+    if value not in choices:
+        raise ValueError(f"{name}={value!r} is invalid: one of {tuple(choices)}")
+
+
+def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[str, Any]:
+    """The settings of ``algo`` on ``env_id``: the file's ``default`` section for ``algo``,
+    updated with the env's own entry. Keys: ``n_timesteps``, ``n_envs``, ``policy``,
+    ``normalize``, optional ``policy_kwargs``, and algorithm keyword arguments."""
+    _check_choice("env_id", env_id, tuple(marine_envs.ENVIRONMENTS))
+    _check_choice("algo", algo, tuple(ALGOS))
+    import yaml  # here: only reading the settings needs PyYAML
+
+    table = yaml.safe_load(path.read_text())
+    params = dict(table.get("default", {}).get(algo, {}))
+    params.update(table.get(env_id, {}).get(algo, {}) or {})
+    if not params:
+        raise ValueError(f"{path} has no settings for algo {algo!r} (nor a default)")
+    return params
+
+
+# -- the vector environment adapter ---------------------------------------------------------
+
+def _split_info(info: Mapping[str, Any], n: int) -> list[dict[str, Any]]:
+    """Gymnasium's batched info dict (``key`` + mask ``_key``) as one dict per environment."""
+    out: list[dict[str, Any]] = [{} for _ in range(n)]
+    for key, value in info.items():
+        if key.startswith("_"):
+            continue
+        mask = info.get(f"_{key}")
+        parts = _split_info(value, n) if isinstance(value, Mapping) else value
+        for i in range(n):
+            if mask is None or mask[i]:
+                out[i][key] = parts[i]
+    return out
+
+
+def _chain(env: VectorEnv) -> list[VectorEnv]:
+    """The wrappers of ``env`` from the outermost in, then the base environment."""
+    chain = [env]
+    while isinstance(chain[-1], VectorWrapper):
+        chain.append(chain[-1].env)
+    return chain
+
+
+class SB3VecEnv(VecEnv):
+    """A Gymnasium ``VectorEnv`` seen as an SB3 ``VecEnv``, so that SB3 trains on the native
+    batched environment (no Python loop over boats).
+
+    SB3 expects a finished environment to be reset within the step that ended it (its obs is
+    the new episode's first, ``info["terminal_observation"]`` the last). Gymnasium vector envs
+    with ``AutoresetMode.SAME_STEP`` do that already. Ours use ``NEXT_STEP``: they reset a
+    finished boat on the following step and ignore its action there, which SB3 would record
+    as a bogus transition; so the adapter resets finished boats itself, right away, with the
+    env's ``restart(idx)`` (:class:`~marine_envs.envs.base.MarineVectorEnv`, and
+    :class:`~estimators.VectorEstimatorWrapper` over it).
+
+    The batched environment is one object: ``get_attr``/``set_attr``/``env_method`` act on it
+    and return its answer once per requested index.
+    """
+
+    def __init__(self, venv: VectorEnv) -> None:
+        self.venv = venv
+        self.mode = venv.metadata.get("autoreset_mode", AutoresetMode.NEXT_STEP)
+        if self.mode == AutoresetMode.NEXT_STEP:
+            self._check_restartable(venv)
+        elif self.mode != AutoresetMode.SAME_STEP:
+            raise ValueError(f"autoreset_mode {self.mode!r} is not supported: NEXT_STEP "
+                             "(marine envs) or SAME_STEP")
+        super().__init__(venv.num_envs, venv.single_observation_space, venv.single_action_space)
+        self._actions: np.ndarray | None = None
+
+    @staticmethod
+    def _check_restartable(venv: VectorEnv) -> None:
+        if not callable(getattr(venv, "restart", None)):
+            raise ValueError("a NEXT_STEP vector env needs restart(idx) to reset finished boats "
+                             "within the step (marine_envs' native vector envs and "
+                             f"VectorEstimatorWrapper have it); got {venv}")
+
+    # -- SB3's VecEnv interface ---------------------------------------------------------
+    def reset(self) -> VecEnvObs:
+        seeds = None if all(s is None for s in self._seeds) else list(self._seeds)
+        options = self._options[0] or None
+        if any(o != self._options[0] for o in self._options):
+            raise ValueError("a batched env takes one set of reset options for all boats")
+        obs, info = self.venv.reset(seed=seeds, options=options)
+        self.reset_infos = _split_info(info, self.num_envs)
+        self._reset_seeds()
+        self._reset_options()
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = actions
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, rewards, terminated, truncated, info = self.venv.step(self._actions)
+        terminated, truncated = np.asarray(terminated), np.asarray(truncated)
+        dones = terminated | truncated
+        infos = _split_info(info, self.num_envs)
+        done = np.flatnonzero(dones)
+        if done.size:
+            obs = np.array(obs)  # the rows of finished boats are replaced below
+            final = info.get("final_obs")  # SAME_STEP: obs already holds the new episodes
+            for i in done:
+                infos[i].pop("final_obs", None)
+                infos[i]["terminal_observation"] = obs[i].copy() if final is None else final[i]
+                infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+            if self.mode == AutoresetMode.NEXT_STEP:
+                obs[done] = self._restart(done)
+        return obs, np.asarray(rewards, dtype=np.float32), dones, infos
+
+    def close(self) -> None:
+        self.venv.close()
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        return [getattr(self.venv, attr_name)] * len(self._get_indices(indices))
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        setattr(self.venv, attr_name, value)
+
+    def env_method(self, method_name: str, *method_args: Any, indices: Any = None,
+                   **method_kwargs: Any) -> list[Any]:
+        result = getattr(self.venv, method_name)(*method_args, **method_kwargs)
+        return [result] * len(self._get_indices(indices))
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        wrapped = any(isinstance(env, wrapper_class) for env in _chain(self.venv))
+        return [wrapped] * len(self._get_indices(indices))
+
+    # -- NEXT_STEP autoreset done at once ------------------------------------------------
+    def _restart(self, idx: np.ndarray) -> np.ndarray:
+        """Start new episodes of boats ``idx`` now and return their first observations: the
+        env's own ``reset`` when every boat restarts (exact: the episode generators carry
+        on), else its ``restart`` of those boats (see ``MarineVectorEnv.restart``)."""
+        if idx.size == self.num_envs:
+            obs, _ = self.venv.reset()
+            return obs
+        obs, _ = self.venv.restart(idx)
+        return obs
+
+
+# -- building environments ------------------------------------------------------------------
+
+def _estimator(name: str, env: Any) -> Any:
+    from estimators import ExtendedKalmanFilter, KalmanFilter
+
+    return (ExtendedKalmanFilter if name == "ekf" else KalmanFilter).for_env(env)
+
+
+def _single_env(env_id: str, estimator: str | None, max_episode_steps: int | None) -> gym.Env:
+    from estimators import EstimatorWrapper
+
+    env = gym.make(env_id, max_episode_steps=max_episode_steps)
+    return env if estimator is None else EstimatorWrapper(env, _estimator(estimator, env))
+
+
+def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: int = 0,
+                 backend: str = "native", max_episode_steps: int | None = None) -> VecEnv:
+    """``n_envs`` copies of ``env_id`` as an SB3 ``VecEnv`` with episode statistics
+    (``info["episode"]``), seeded ``seed, seed + 1, ...`` at their first reset.
+
+    :param estimator: None (the agent sees the sensors), ``"kf"`` or ``"ekf"``.
+    :param backend: ``"native"``: the batched env through :class:`SB3VecEnv`; ``"dummy"``:
+        SB3's ``DummyVecEnv`` of single envs (same numbers, slower).
+    :param max_episode_steps: episode length, steps (default: the registered one).
+    """
+    _check_choice("env_id", env_id, tuple(marine_envs.ENVIRONMENTS))
+    _check_choice("estimator", estimator, ESTIMATORS)
+    _check_choice("backend", backend, BACKENDS)
+    if not (isinstance(n_envs, int) and n_envs >= 1):
+        raise ValueError(f"n_envs={n_envs!r} is invalid: an integer >= 1")
+    steps = max_episode_steps or gym.spec(env_id).max_episode_steps
+    if backend == "dummy":
+        venv: VecEnv = DummyVecEnv([lambda: Monitor(_single_env(env_id, estimator, steps))
+                                    for _ in range(n_envs)])
+    else:
+        from estimators import wrap
+
+        native = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point",
+                              max_episode_steps=steps)
+        if estimator is not None:
+            native = wrap(native, _estimator(estimator, native))
+        venv = VecMonitor(SB3VecEnv(native))
+    venv.seed(seed)
+    return venv
+
+
+# -- training -------------------------------------------------------------------------------
+
+@dataclasses.dataclass
+class TrainResult:
+    """What :func:`train` did: output directory, environment steps taken, wall-clock time (s)
+    and throughput (environment steps per second, learning included)."""
+
+    out: Path
+    timesteps: int
+    wall_seconds: float
+    steps_per_second: float
+
+
+def _importable(*modules: str) -> bool:
+    return all(importlib.util.find_spec(m) is not None for m in modules)
+
+
+def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
+          timesteps: int | None = None, out: Path = Path("runs/sb3"), seed: int = 0,
+          n_envs: int | None = None, backend: str = "native", progress_bar: bool = True,
+          hyperparams: Mapping[str, Any] | None = None,
+          max_episode_steps: int | None = None, torch_threads: int | None = 1) -> TrainResult:
+    """Train ``algo`` on ``env_id`` and save ``model.zip``, ``vecnormalize.pkl`` (when the
+    settings normalise), ``config.json`` and ``checkpoints/`` into ``out``.
+
+    :param timesteps: environment steps (default: the YAML's ``n_timesteps``).
+    :param n_envs: parallel environments (default: the YAML's).
+    :param hyperparams: overrides of the YAML's settings (e.g. ``{"n_steps": 128}``).
+    :param torch_threads: torch's intra-op threads while training (None: leave as is). One by
+        default: small MLPs gain nothing from more, and torch's threads spinning against
+        numpy's made training 20x slower on 2 cores.
+    """
+    _check_choice("algo", algo, tuple(ALGOS))
+    _check_choice("estimator", estimator, ESTIMATORS)
+    _check_choice("backend", backend, BACKENDS)
+    params = {**load_hyperparams(env_id, algo), **dict(hyperparams or {})}
+    timesteps = int(params.pop("n_timesteps") if timesteps is None else timesteps)
+    if timesteps <= 0:
+        raise ValueError(f"timesteps={timesteps!r} is invalid: a positive number of steps")
+    n_envs = int(params.pop("n_envs") if n_envs is None else n_envs)
+    params.pop("n_timesteps", None)
+    params.pop("n_envs", None)
+    config = {"env_id": env_id, "algo": algo, "estimator": estimator, "seed": seed,
+              "n_envs": n_envs, "backend": backend, "max_episode_steps": max_episode_steps,
+              "hyperparams": copy.deepcopy(params)}
+    policy, normalize = params.pop("policy"), bool(params.pop("normalize", False))
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    venv = make_vec_env(env_id, n_envs, estimator, seed, backend, max_episode_steps)
+    if normalize:  # rewards too only on-policy: a replay buffer would keep stale scales
+        venv = VecNormalize(venv, gamma=params.get("gamma", 0.99),
+                            norm_reward=algo in ON_POLICY)
+    tensorboard = str(out / "tb") if _importable("tensorboard") else None
+    model = ALGOS[algo](policy, venv, seed=seed, device="cpu", verbose=0,
+                        tensorboard_log=tensorboard, **params)
+    # about five checkpoints a run; save_freq counts vector steps, n_envs env steps each
+    every = max(1, math.ceil(timesteps / 5 / n_envs))
+    checkpoints = CheckpointCallback(every, str(out / "checkpoints"), name_prefix="model",
+                                     save_vecnormalize=normalize)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(torch_threads or threads)
+    start = time.perf_counter()
+    try:
+        model.learn(timesteps, callback=checkpoints,
+                    progress_bar=progress_bar and _importable("tqdm", "rich"))
+    finally:
+        torch.set_num_threads(threads)
+    wall = time.perf_counter() - start
+    result = TrainResult(out, int(model.num_timesteps), wall, model.num_timesteps / wall)
+    model.save(out / "model.zip")
+    if normalize:
+        venv.save(str(out / "vecnormalize.pkl"))
+    config.update(timesteps=result.timesteps, wall_seconds=wall,
+                  steps_per_second=result.steps_per_second)
+    (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    venv.close()
+    return result
+
+
+# -- using a trained agent ------------------------------------------------------------------
+
+@dataclasses.dataclass
+class Agent:
+    """A trained model with SB3's ``predict``, fed single-env observations; normalises them as
+    in training (frozen statistics) when training used ``VecNormalize``."""
+
+    model: BaseAlgorithm
+    normalizer: VecNormalize | None
+    config: dict[str, Any]
+
+    def predict(self, observation: np.ndarray, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, Any]:
+        obs = np.asarray(observation)
+        if self.normalizer is not None:
+            obs = self.normalizer.normalize_obs(obs)
+        return self.model.predict(obs, state, episode_start, deterministic)
+
+
+def load_agent(out: Path) -> Agent:
+    """The agent :func:`train` saved into ``out``."""
+    out = Path(out)
+    config = json.loads((out / "config.json").read_text())
+    model = ALGOS[config["algo"]].load(out / "model.zip", device="cpu")
+    normalizer = None
+    if (out / "vecnormalize.pkl").exists():
+        # unpickled without its env: only its statistics are used, never updated
+        with open(out / "vecnormalize.pkl", "rb") as f:
+            normalizer = pickle.load(f)
+        normalizer.training = False
+    return Agent(model, normalizer, config)
+
+
+def evaluate(out: Path, episodes: int = 5, seed: int = 0) -> dict[str, Any]:
+    """Run the agent saved in ``out`` for ``episodes`` episodes of seeds ``seed, seed + 1,
+    ...`` on a single env (behind the training estimator).
+
+    :return: ``mean_return``, ``std_return`` and per-episode ``returns`` (reward units).
+    """
+    if not (isinstance(episodes, int) and episodes >= 1):
+        raise ValueError(f"episodes={episodes!r} is invalid: an integer >= 1")
+    agent = load_agent(out)
+    config = agent.config
+    env = _single_env(config["env_id"], config["estimator"], config.get("max_episode_steps"))
+    steps = config.get("max_episode_steps") or gym.spec(config["env_id"]).max_episode_steps
+    returns = [run_episode(env, agent, steps, seed=seed + k).episode_return
+               for k in range(episodes)]
+    env.close()
+    return {"mean_return": float(np.mean(returns)), "std_return": float(np.std(returns)),
+            "returns": returns, "episodes": episodes, "seed": seed}

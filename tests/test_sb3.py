@@ -1,0 +1,127 @@
+"""Stable-Baselines3 glue: the native adapter matches DummyVecEnv; train, load, evaluate."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+import marine_envs  # noqa: F401  (registers the environments)
+from agents.sb3 import SB3VecEnv, evaluate, load_agent, make_vec_env, train
+from estimators import EstimatorWrapper, KalmanFilter, wrap
+
+USV = "marine_envs/USV-v0"
+
+
+def _step_both(a, b, steps: int, seed: int = 0):
+    """Feed both VecEnvs the same random actions; yield their step results."""
+    rng = np.random.default_rng(seed)
+    for _ in range(steps):
+        actions = rng.uniform(-1, 1, (a.num_envs, *a.action_space.shape)).astype(np.float32)
+        a.step_async(actions)
+        b.step_async(actions)
+        yield a.step_wait(), b.step_wait()
+
+
+@pytest.mark.parametrize("estimator", [None, "kf"])
+def test_native_matches_dummy_across_episode_end(estimator):
+    kwargs = dict(n_envs=3, estimator=estimator, seed=7, max_episode_steps=10)
+    native = make_vec_env(USV, backend="native", **kwargs)
+    dummy = make_vec_env(USV, backend="dummy", **kwargs)
+    np.testing.assert_array_equal(native.reset(), dummy.reset())
+    ends = 0
+    for (oa, ra, da, ia), (ob, rb, db, ib) in _step_both(native, dummy, 30):
+        np.testing.assert_array_equal(da, db)
+        np.testing.assert_allclose(ra, rb, rtol=1e-6)
+        np.testing.assert_allclose(oa, ob, rtol=1e-6, atol=1e-6)  # after a done: reset obs
+        for i in np.flatnonzero(da):
+            ends += 1
+            assert ia[i]["TimeLimit.truncated"] and ib[i]["TimeLimit.truncated"]
+            np.testing.assert_allclose(ia[i]["terminal_observation"],
+                                       ib[i]["terminal_observation"], rtol=1e-6, atol=1e-6)
+            assert ia[i]["episode"]["l"] == 10
+    assert ends == 9  # three episode ends of three envs
+
+
+@pytest.mark.parametrize("estimator", [None, "kf"])
+def test_native_restarts_one_boat_at_once(estimator):
+    """Boats failing at different steps: the others run on undisturbed, the failed one starts
+    over within the step (SB3's convention), with the first observation DummyVecEnv gives."""
+    kwargs = dict(max_episode_steps=40, max_roll=0.03)
+    vector = gym.make_vec(USV, num_envs=3, vectorization_mode="vector_entry_point", **kwargs)
+    singles = [gym.make(USV, **kwargs) for _ in range(3)]
+    if estimator:
+        vector = wrap(vector, KalmanFilter.for_env(vector))
+        singles = [EstimatorWrapper(env, KalmanFilter.for_env(env)) for env in singles]
+    native = SB3VecEnv(vector)
+    dummy = DummyVecEnv([lambda env=env: env for env in singles])
+    native.seed(1)
+    dummy.seed(1)
+    native.reset()
+    dummy.reset()
+    restarted = np.zeros(3, dtype=bool)
+    partial = 0
+    for (oa, ra, da, ia), (ob, rb, db, ib) in _step_both(native, dummy, 40):
+        np.testing.assert_array_equal(da, db)
+        np.testing.assert_allclose(ra, rb, rtol=1e-6)  # rewards follow the true state
+        np.testing.assert_array_equal(oa[~restarted], ob[~restarted])
+        np.testing.assert_array_equal(oa[da], ob[da])  # the new episodes' first observations
+        for i in np.flatnonzero(da):
+            if not restarted[i]:  # a restarted boat's sensors sample one step late
+                np.testing.assert_array_equal(ia[i]["terminal_observation"],
+                                              ib[i]["terminal_observation"])
+            assert ia[i]["TimeLimit.truncated"] == ib[i]["TimeLimit.truncated"]
+        partial += bool(da.any() and not da.all())
+        restarted |= da
+    assert partial >= 2
+
+
+def test_train_load_evaluate(tmp_path):
+    out = tmp_path / "run"
+    result = train(USV, "ppo", estimator="kf", timesteps=1024, out=out, n_envs=2,
+                   progress_bar=False, hyperparams={"n_steps": 256, "batch_size": 128,
+                                                    "n_epochs": 2})
+    assert result.timesteps >= 1024 and result.steps_per_second > 0
+    assert (out / "model.zip").exists() and (out / "vecnormalize.pkl").exists()
+    assert list((out / "checkpoints").glob("model_*_steps.zip"))
+    config = json.loads((out / "config.json").read_text())
+    assert config["estimator"] == "kf" and config["n_envs"] == 2
+    assert config["hyperparams"]["n_steps"] == 256
+    agent = load_agent(out)
+    obs = np.zeros(agent.model.observation_space.shape, dtype=np.float32)
+    action, _ = agent.predict(obs)
+    assert action.shape == agent.model.action_space.shape
+    first, second = evaluate(out, episodes=2), evaluate(out, episodes=2)
+    assert len(first["returns"]) == 2 and np.isfinite(first["returns"]).all()
+    assert np.isfinite(first["mean_return"]) and np.isfinite(first["std_return"])
+    assert first == second
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"algo": "dqn"}, "ppo"),
+    ({"estimator": "ukf"}, "ekf"),
+    ({"backend": "async"}, "dummy"),
+    ({"timesteps": 0}, "timesteps"),
+    ({"env_id": "marine_envs/Nope-v0"}, "USV-v0"),
+])
+def test_bad_input_is_refused(tmp_path, kwargs, message):
+    args = {"env_id": USV, "out": tmp_path, "progress_bar": False, **kwargs}
+    with pytest.raises(ValueError, match=message):
+        train(**args)
+    assert not (tmp_path / "model.zip").exists()
+
+
+def test_cli_trains_and_evaluates(tmp_path, capsys):
+    from agents.cli import main
+
+    out = tmp_path / "cli"
+    assert main(["train", USV, "--estimator", "kf", "--timesteps", "256", "--n-envs", "2",
+                 "--out", str(out), "--quiet"]) == 0
+    assert "saved to" in capsys.readouterr().out and (out / "model.zip").exists()
+    assert main(["evaluate", str(out), "--episodes", "1"]) == 0
+    assert "return over 1 episodes" in capsys.readouterr().out
+    assert main(["train", USV, "--algo", "dqn", "--out", str(out)]) == 2
+    assert "ppo" in capsys.readouterr().err
