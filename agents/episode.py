@@ -21,6 +21,15 @@ EPISODE_POLICIES = (*POLICIES, "lqr-state")
 EPISODE_ESTIMATORS = ("kf", "ekf")
 
 
+def make_estimator(name: str, env: Any) -> Any:
+    """An estimator of :data:`EPISODE_ESTIMATORS` for ``env`` (single or vector): ``"kf"``, a
+    Kalman filter of the model linearised at the reference, or ``"ekf"``, an extended Kalman
+    filter of the nonlinear model; their noise from the env's sensors and disturbances."""
+    from estimators import ExtendedKalmanFilter, KalmanFilter
+
+    return (ExtendedKalmanFilter if name == "ekf" else KalmanFilter).for_env(env)
+
+
 class OnTrueState:
     """A policy fed the true state (``info["state"]``) instead of the observation: an oracle
     baseline, the best an estimator could give the controller."""
@@ -61,10 +70,9 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     steps = env.spec.max_episode_steps if seconds is None else max(1, round(seconds / sim.dt))
     env = gym.wrappers.TimeLimit(env.unwrapped, steps)  # the requested length, not the spec's
     if estimator is not None:
-        from estimators import EstimatorWrapper, ExtendedKalmanFilter, KalmanFilter
+        from estimators import EstimatorWrapper
 
-        kind = ExtendedKalmanFilter if estimator == "ekf" else KalmanFilter
-        env = EstimatorWrapper(env, kind.for_env(env))
+        env = EstimatorWrapper(env, make_estimator(estimator, env))
     episode = run_episode(env, episode_policy(policy, env, seed), steps, seed=seed)
     if plot is not None:
         title = f"{env_id}, policy {policy}" + (f" on {estimator}" if estimator else "")

@@ -31,10 +31,11 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepR
 
 import marine_envs
 
+from .episode import EPISODE_ESTIMATORS, make_estimator
 from .evaluation import run_episode
 
 ALGOS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C}
-ESTIMATORS = (None, "kf", "ekf")
+ESTIMATORS = (None, *EPISODE_ESTIMATORS)
 BACKENDS = ("native", "dummy")
 HYPERPARAMS = Path(__file__).with_name("hyperparams.yaml")
 #: Algorithms that learn from fresh rollouts: their returns, not only observations, are scaled.
@@ -186,17 +187,11 @@ class SB3VecEnv(VecEnv):
 
 # -- building environments ------------------------------------------------------------------
 
-def _estimator(name: str, env: Any) -> Any:
-    from estimators import ExtendedKalmanFilter, KalmanFilter
-
-    return (ExtendedKalmanFilter if name == "ekf" else KalmanFilter).for_env(env)
-
-
 def _single_env(env_id: str, estimator: str | None, max_episode_steps: int | None) -> gym.Env:
     from estimators import EstimatorWrapper
 
     env = gym.make(env_id, max_episode_steps=max_episode_steps)
-    return env if estimator is None else EstimatorWrapper(env, _estimator(estimator, env))
+    return env if estimator is None else EstimatorWrapper(env, make_estimator(estimator, env))
 
 
 def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: int = 0,
@@ -224,7 +219,7 @@ def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: i
         native = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point",
                               max_episode_steps=steps)
         if estimator is not None:
-            native = wrap(native, _estimator(estimator, native))
+            native = wrap(native, make_estimator(estimator, native))
         venv = VecMonitor(SB3VecEnv(native))
     venv.seed(seed)
     return venv
@@ -266,12 +261,11 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
     _check_choice("estimator", estimator, ESTIMATORS)
     _check_choice("backend", backend, BACKENDS)
     params = {**load_hyperparams(env_id, algo), **dict(hyperparams or {})}
-    timesteps = int(params.pop("n_timesteps") if timesteps is None else timesteps)
+    yaml_timesteps, yaml_envs = params.pop("n_timesteps"), params.pop("n_envs")
+    timesteps = int(yaml_timesteps if timesteps is None else timesteps)
     if timesteps <= 0:
         raise ValueError(f"timesteps={timesteps!r} is invalid: a positive number of steps")
-    n_envs = int(params.pop("n_envs") if n_envs is None else n_envs)
-    params.pop("n_timesteps", None)
-    params.pop("n_envs", None)
+    n_envs = int(yaml_envs if n_envs is None else n_envs)
     config = {"env_id": env_id, "algo": algo, "estimator": estimator, "seed": seed,
               "n_envs": n_envs, "backend": backend, "max_episode_steps": max_episode_steps,
               "hyperparams": copy.deepcopy(params)}
