@@ -1,4 +1,11 @@
-"""Agents: LQR baselines, excitation signals, evaluation, the ``marine`` command line.
+"""Agents: LQR baselines, Stable-Baselines3 agents, one evaluation path, the estimator
+benchmark grid, excitation signals, the source documents' experiments and the ``marine``
+command line.
 
-(Stable-Baselines3 training and the estimator ablation benchmarks arrive with later issues.)
+* :mod:`agents.lqr`: discrete/continuous LQR of any vehicle's task, on sensors, state or estimate;
+* :mod:`agents.sb3`: SB3 training on the native batched env, RL-Zoo-style hyperparameters;
+* :mod:`agents.evaluation`: episodes with fixed seeds scored on the task's quadratic cost, RMS
+  errors in physical units, actuator usage and estimation error; estimators by name;
+* :mod:`agents.benchmark`: ``marine bench``, the vehicles x estimators x seas x sensors x
+  controllers x seeds grid, locally or on Ray.
 """

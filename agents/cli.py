@@ -1,10 +1,12 @@
-"""The ``marine`` command line: demo, simulate, episode, reproduce, envs, diagnose."""
+"""The ``marine`` command line: demo, simulate, episode, reproduce, diagnose, train, evaluate,
+bench, envs."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
 import json
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -41,6 +43,27 @@ the JSON (--json, or diagnosis.json in --report):
   findings [{effect, target, parameters, std, confidence, improvement, explanation}],
   fit {before: {rmse}, after: {rmse}, improvement, validation, terms} (held-out, SI units),
   calibration (with --calibrate)
+"""
+
+
+BENCH_DESCRIPTION = """\
+Run a grid of vehicles x estimators x sea states x sensor degradations x controllers x seeds.
+Every controller is scored by the task's quadratic cost on the same seeded episodes; each cell
+(all axes but the seed) runs its seeds as one batch. SB3 agents named in --controllers are
+trained first, one per vehicle and estimator, on the moderate sea and default sensors, and
+kept in DIR/agents. Finished cells are kept in DIR/rows.csv and not run again.
+
+outputs (in --out):
+  rows.csv, rows.parquet  a row per seed: vehicle, estimator, controller, sea, sensor, seed,
+                          status (ok or n/a: why), cost, failed, seconds, rms_<state> and
+                          rms_<input> (SI; _deg: degrees), saturated, estimation_rms_<state>
+  summary.md              cost mean ± std per cell; the check true <= KF <= raw under LQR
+  cost_by_estimator.png   cost by estimator per vehicle, a bar per controller
+  degradation.png         cost against each degradation's level (if it has several levels)
+
+on a Ray cluster: start it (ray start --head on one machine, ray start --address HEAD:6379 on
+the others, each with marine-envs installed), then run on any of them:
+  marine bench --backend ray --address auto --seeds 20 --sensors default noise=4 noise=16
 """
 
 
@@ -170,13 +193,44 @@ def _train(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from .sb3 import evaluate
 
-    result = evaluate(Path(args.dir), args.episodes, args.seed)
-    print(f"return over {result['episodes']} episodes (seeds {result['seed']}.."
-          f"{result['seed'] + result['episodes'] - 1}): {result['mean_return']:.1f} "
-          f"± {result['std_return']:.1f}")
+    rows = evaluate(Path(args.dir), args.episodes, args.seed)
+    print(f"{args.episodes} episodes, seeds {args.seed}..{args.seed + args.episodes - 1} "
+          "(mean ± std; angles in degrees):")
+    for key in rows[0]:
+        if key != "seed":
+            values = [row[key] for row in rows]
+            print(f"  {key:28s} {np.mean(values):12.5g} ± {np.std(values):.3g}")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"rows": rows}, indent=2) + "\n")
     return 0
+
+
+def _bench(args: argparse.Namespace) -> int:
+    from .benchmark import Grid, markdown_summary, run_grid, write_outputs, write_report
+
+    chosen = {k: tuple(v) if isinstance(v, list) else v for k, v in vars(args).items()
+              if k in GRID_OPTIONS and v is not None}
+    grid = dataclasses.replace(Grid.quick(), **chosen) if args.quick else Grid(**chosen)
+    out = Path(args.out)
+    rows = run_grid(grid, out, args.backend, args.workers, args.address, not args.quiet)
+    written = write_outputs(rows, out)
+    print(markdown_summary(rows))
+    if args.report:
+        written.append(write_report(rows, out, Path(args.report), grid))
+    if args.json:
+        records = json.loads(rows.to_json(orient="records"))
+        Path(args.json).write_text(json.dumps({"rows": records}, indent=1) + "\n")
+        written.append(Path(args.json))
+    print("wrote " + ", ".join(map(str, written)))
+    return 0
+
+
+GRID_OPTIONS = ("vehicles", "estimators", "controllers", "seas", "sensors", "seeds", "seconds",
+                "timesteps")
 
 
 def _read_params(path: str) -> dict[str, float]:
@@ -261,9 +315,10 @@ def build_parser() -> argparse.ArgumentParser:
                               "sensors), or an excitation: zero, sine, random, prbs")
     episode.add_argument("--estimator", choices=EPISODE_ESTIMATORS,
                          help="put an estimator between the sensors and the policy: kf (a "
-                              "Kalman filter of the env's linearised model) or ekf (an extended "
-                              "Kalman filter of its nonlinear model); --policy lqr then acts on "
-                              "the full estimated state")
+                              "Kalman filter of the env's linearised model), akf (seed 001's "
+                              "adaptive one), ekf (an extended Kalman filter of its nonlinear "
+                              "model) or pd (seed 000's PD observer, USV only); --policy lqr "
+                              "then acts on the full estimated state")
     episode.add_argument("--seconds", type=float, help="episode length, s (the env's own)")
     episode.add_argument("--seed", type=int, default=0, help="episode seed (0)")
     episode.add_argument("--plot", metavar="PNG", help="write a figure of the episode")
@@ -324,8 +379,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "vecnormalize.pkl (if normalised) and checkpoints/ into --out.")
     train.add_argument("env_id", help="environment id, e.g. marine_envs/USV-v0")
     train.add_argument("--algo", default="ppo", help="ppo, sac, td3 or a2c (default ppo)")
-    train.add_argument("--estimator", help="kf or ekf between the sensors and the agent "
-                                           "(default: the agent sees the sensors)")
+    train.add_argument("--estimator",
+                       help="what the agent sees: raw (the sensors, the default), true (the "
+                            "true state) or an estimator: kf, akf, ekf, pd (USV only)")
     train.add_argument("--timesteps", type=int,
                        help="environment steps (default: the YAML's n_timesteps)")
     train.add_argument("--n-envs", type=int, help="boats stepped together (default: the YAML's)")
@@ -337,12 +393,59 @@ def build_parser() -> argparse.ArgumentParser:
     train.set_defaults(run=_train)
 
     evaluate = commands.add_parser(
-        "evaluate", help="evaluate an agent 'marine train' saved: returns over seeded episodes")
+        "evaluate", help="evaluate an agent 'marine train' saved: cost and errors over seeded "
+                         "episodes",
+        description="Run the agent over seeded episodes behind its training estimator and print "
+                    "the task's quadratic cost, failures, RMS errors of the weighted states and "
+                    "inputs (angles in degrees), the fraction of saturated steps and the "
+                    "estimator's RMS errors, as mean ± std over the episodes.")
     evaluate.add_argument("dir", help="the directory 'marine train --out' wrote")
     evaluate.add_argument("--episodes", type=int, default=5, help="episodes (default 5)")
     evaluate.add_argument("--seed", type=int, default=0,
                           help="first episode's seed; the others follow (default 0)")
+    evaluate.add_argument("--json", metavar="PATH", help="also write {\"rows\": [...]} as JSON")
     evaluate.set_defaults(run=_evaluate)
+
+    bench = commands.add_parser(
+        "bench", help="estimator x controller benchmark grid over vehicles, seas and sensors",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description=BENCH_DESCRIPTION)
+    axes = bench.add_argument_group("the grid (each a space-separated list)")
+    axes.add_argument("--vehicles", nargs="+", type=str,
+                      help="usv hydrofoil rov dp hovercraft (default: all)")
+    axes.add_argument("--estimators", nargs="+",
+                      help="true raw kf akf ekf pd, or one registered with "
+                           "agents.evaluation.register_estimator (default: true raw kf akf ekf)")
+    axes.add_argument("--controllers", nargs="+",
+                      help="lqr, nominal, ppo/sac/td3/a2c (trained here per vehicle and "
+                           "estimator) or sb3:DIR (a 'marine train' output) (default: lqr)")
+    axes.add_argument("--seas", nargs="+", help="calm moderate rough (default: moderate)")
+    axes.add_argument("--sensors", nargs="+",
+                      help="default, or degradations kind=level joined by +: noise=K (K x the "
+                           "default noise), quant=K (a step of K default stds), dropout=P, "
+                           "delay=N (control periods); e.g. default noise=4 dropout=0.2")
+    axes.add_argument("--seeds", type=int, help="episodes per cell, seeds 0..N-1 (default 5)")
+    axes.add_argument("--seconds", type=float, help="episode length, s (default: the env's)")
+    axes.add_argument("--timesteps", type=int,
+                      help="training steps of each agent the grid trains (default 100000)")
+    bench.add_argument("--quick", action="store_true",
+                       help="a small grid over all five vehicles: true raw kf akf, lqr and ppo, "
+                            "default and noise=32 sensors, 3 seeds of 60 s, 20000-step PPO "
+                            "(other options override its settings)")
+    bench.add_argument("--out", default="bench", metavar="DIR",
+                       help="rows.csv, summary.md, figures, trained agents; a rerun resumes "
+                            "(default: bench)")
+    bench.add_argument("--backend", choices=("local", "ray"), default="local",
+                       help="local processes (default) or Ray tasks")
+    bench.add_argument("--address", help="Ray cluster address (auto, or HOST:PORT); without it "
+                                         "--backend ray starts a local Ray")
+    bench.add_argument("--workers", type=int, default=os.cpu_count() or 1,
+                       help="processes (local) or CPUs of the local Ray (default: all cores)")
+    bench.add_argument("--json", metavar="PATH", help='also write {"rows": [...]} as JSON')
+    bench.add_argument("--report", metavar="DIR",
+                       help="also write DIR/index.html: the tables and figures in one page")
+    bench.add_argument("--quiet", action="store_true", help="no progress bars")
+    bench.set_defaults(run=_bench)
 
     envs = commands.add_parser("envs", help="list the environments with their spaces")
     envs.set_defaults(run=_envs)

@@ -12,22 +12,13 @@ import numpy as np
 
 import marine_envs  # noqa: F401  (registers the environments)
 
-from .evaluation import Episode, run_episode
+from .evaluation import ESTIMATORS, Episode, episode_metrics, run_episode
 from .lqr import LQRPolicy
 from .simulate import POLICIES, make_policy
 
 EPISODE_POLICIES = (*POLICIES, "lqr-state")
 #: Estimators ``marine episode --estimator`` can put between the sensors and the policy.
-EPISODE_ESTIMATORS = ("kf", "ekf")
-
-
-def make_estimator(name: str, env: Any) -> Any:
-    """An estimator of :data:`EPISODE_ESTIMATORS` for ``env`` (single or vector): ``"kf"``, a
-    Kalman filter of the model linearised at the reference, or ``"ekf"``, an extended Kalman
-    filter of the nonlinear model; their noise from the env's sensors and disturbances."""
-    from estimators import ExtendedKalmanFilter, KalmanFilter
-
-    return (ExtendedKalmanFilter if name == "ekf" else KalmanFilter).for_env(env)
+EPISODE_ESTIMATORS = tuple(ESTIMATORS)
 
 
 class OnTrueState:
@@ -55,11 +46,12 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     """One episode of ``env_id`` under ``policy``; optionally a figure of it.
 
     :param seconds: episode length, s (default: the environment's own episode).
-    :param estimator: ``"kf"``: a Kalman filter of the env's model linearised at the reference,
-        or ``"ekf"``: an extended Kalman filter of the nonlinear model (their noise from the env's
-        sensors and disturbances) turns the sensor output into the policy's observation.
-    :return: summary: return, steps, terminated, RMS error of each weighted state (SI; angles
-        also in degrees), and with an estimator the RMS estimation error of those states.
+    :param estimator: a registered estimator (:data:`agents.evaluation.ESTIMATORS`: ``"kf"``,
+        a Kalman filter of the env's model linearised at the reference; ``"akf"``, seed 001's
+        adaptive one; ``"ekf"``, an extended Kalman filter of the nonlinear model; ``"pd"``, seed
+        000's PD observer, USV only) turns the sensor output into the policy's observation.
+    :return: summary: return, cost, failed, RMS error of each weighted state and input (SI;
+        angles in degrees), and with an estimator the RMS estimation error of every state.
     """
     if estimator is not None and estimator not in EPISODE_ESTIMATORS:
         raise ValueError(f"estimator={estimator!r} is invalid: one of {EPISODE_ESTIMATORS}")
@@ -72,7 +64,7 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     if estimator is not None:
         from estimators import EstimatorWrapper
 
-        env = EstimatorWrapper(env, make_estimator(estimator, env))
+        env = EstimatorWrapper(env, ESTIMATORS[estimator](env))
     episode = run_episode(env, episode_policy(policy, env, seed), steps, seed=seed)
     if plot is not None:
         title = f"{env_id}, policy {policy}" + (f" on {estimator}" if estimator else "")
@@ -82,24 +74,11 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
 
 
 def summarise(episode: Episode, sim: Any, estimated: bool = False) -> dict[str, float]:
-    """Return, length and the RMS error of each state the task weighs (and of its estimate,
-    when the observations are estimates of the state)."""
-    summary: dict[str, float] = {"return": episode.episode_return,
-                                 "seconds": len(episode.time) * sim.dt,
-                                 "terminated": float(episode.terminated)}
-    error = episode.states - sim.task.x_ref
-    model = sim.model
-    for i in np.flatnonzero(sim.task.q > 0):
-        rms = float(np.sqrt(np.mean(error[:, i] ** 2)))
-        name, unit = model.state_names[i], model.state_units[i]
-        degrees = unit.startswith("rad")
-        summary[f"rms_{name}_deg" if degrees else f"rms_{name}"] = \
-            math.degrees(rms) if degrees else rms
-        if estimated:
-            miss = float(np.sqrt(np.mean((episode.observations[:, i] - episode.states[:, i])**2)))
-            summary[f"estimation_rms_{name}_deg" if degrees else f"estimation_rms_{name}"] = \
-                math.degrees(miss) if degrees else miss
-    return summary
+    """The episode's return and :func:`~agents.evaluation.episode_metrics` (its estimation
+    errors too when the observations are estimates of the state)."""
+    return {"return": episode.episode_return, **episode_metrics(
+        sim, episode.states, episode.inputs, episode.clipped, episode.terminated,
+        episode.observations if estimated else None)}
 
 
 def _measuring_channel(sim: Any, state: int) -> int | None:

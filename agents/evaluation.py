@@ -1,12 +1,27 @@
-"""Run a policy through an environment and keep what happened, for any SB3-style policy."""
+"""One evaluation path for every policy (LQR, SB3, nominal input) behind every estimator.
+
+:func:`run_episode` runs one single environment (for plots and recordings); :func:`rollout`
+runs a batch of boats in the native vector environment, one episode each, and
+:func:`evaluate` scores it: the task's quadratic cost, the RMS error of each weighted state in
+physical units (degrees where the unit is rad), actuator usage and the estimator's own error.
+The batch equals single environments seeded ``seed, seed + 1, ...``, so numbers from either
+path agree.
+"""
 
 from __future__ import annotations
 
 import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from numpy.typing import NDArray
+
+import marine_envs  # noqa: F401  (registers the environments)
+
+FloatArray = NDArray[np.float64]
 
 
 @dataclasses.dataclass
@@ -62,3 +77,254 @@ def run_episode(env: Any, policy: Any, steps: int, seed: int | None = None,
             break
     arrays = {k: np.asarray(v, dtype=bool if k == "clipped" else float) for k, v in rows.items()}
     return Episode(**arrays, terminated=bool(terminated))
+
+
+# -- batched episodes --------------------------------------------------------------------------
+
+@dataclasses.dataclass
+class Rollout:
+    """One episode of each of N boats run side by side: arrays ``(T, N, ...)``, row k holding
+    what was seen and done at step k; boat i's episode is its first ``lengths[i]`` rows."""
+
+    observations: FloatArray
+    states: FloatArray
+    inputs: FloatArray
+    clipped: NDArray[np.bool_]
+    lengths: NDArray[np.intp]
+    terminated: NDArray[np.bool_]
+
+    def episode(self, i: int) -> dict[str, Any]:
+        """Boat ``i``'s rows as ``{observations, states, inputs, clipped, terminated}``."""
+        k = int(self.lengths[i])
+        return {"observations": self.observations[:k, i], "states": self.states[:k, i],
+                "inputs": self.inputs[:k, i], "clipped": self.clipped[:k, i],
+                "terminated": bool(self.terminated[i])}
+
+
+def rollout(venv: Any, policy: Any, steps: int, seed: int,
+            progress: Callable[[int], None] | None = None) -> Rollout:
+    """Run ``policy`` on every boat of the vector env ``venv`` for one episode of at most
+    ``steps`` steps, boat i seeded ``seed + i``; a finished boat's later steps are ignored.
+
+    :param policy: anything with SB3's ``predict`` taking a batch of observations.
+    :param progress: called with the number of steps done since its last call.
+    """
+    n = venv.num_envs
+    obs, info = venv.reset(seed=seed)
+    rows: dict[str, list] = {k: [] for k in ("observations", "states", "inputs", "clipped")}
+    lengths, terminated = np.full(n, steps), np.zeros(n, dtype=bool)
+    running = np.ones(n, dtype=bool)
+    for k in range(steps):
+        action, _ = policy.predict(obs, episode_start=np.full(n, k == 0), deterministic=True)
+        rows["observations"].append(np.asarray(obs, dtype=float))
+        rows["states"].append(np.array(info["state"], dtype=float))  # the env's own array
+        obs, _, term, trunc, info = venv.step(action)
+        rows["inputs"].append(np.array(info["action_applied"], dtype=float))
+        rows["clipped"].append(np.array(info["action_clipped"], dtype=bool))
+        ended = running & (np.asarray(term) | np.asarray(trunc))
+        lengths[ended], terminated[ended & np.asarray(term)] = k + 1, True
+        running &= ~ended
+        if progress is not None and k % 100 == 99:
+            progress(100)
+        if not running.any():
+            break
+    if progress is not None:
+        progress(len(rows["states"]) % 100)
+    return Rollout(**{k: np.stack(v) for k, v in rows.items()}, lengths=lengths,
+                   terminated=terminated)
+
+
+# -- what an episode scores --------------------------------------------------------------------
+
+def _in_user_units(name: str, unit: str, value: float) -> tuple[str, float]:
+    """``rms_<name>`` in SI, or ``rms_<name>_deg`` in degrees where the unit is rad(/s)."""
+    if unit.startswith("rad"):
+        return f"{name}_deg", math.degrees(value)
+    return name, value
+
+
+def _rms(a: FloatArray) -> FloatArray:
+    return np.sqrt(np.mean(a * a, axis=0))
+
+
+def episode_metrics(sim: Any, states: FloatArray, inputs: FloatArray, clipped: NDArray[np.bool_],
+                    terminated: bool, estimates: FloatArray | None = None) -> dict[str, float]:
+    """What one episode scored on ``sim``'s task.
+
+    :param states: true states ``(K, n_x)`` at the steps' starts; ``inputs`` ``(K, n_u)`` the
+        physical inputs applied over them; ``clipped`` ``(K,)`` whether an action was clipped.
+    :param estimates: the estimator's estimate ``(K, >= n_x)`` (its first ``n_x`` columns are the
+        model's states), or None.
+    :return: ``cost`` (the task's quadratic cost summed over the episode, = -return /
+        reward_scale), ``failed`` (1 if the episode ended by failure), ``seconds``;
+        ``rms_<state>`` of each weighted state's deviation from the reference, ``rms_<input>``
+        of each input's from trim, ``saturated`` (fraction of steps with an action clipped);
+        with ``estimates``, ``estimation_rms_<state>`` of every model state. Angles and rates
+        in degrees (``_deg`` names), the rest SI.
+    """
+    task, model = sim.task, sim.model
+    dx, du = states - task.x_ref, inputs - task.u_ref
+    cost = float(np.sum(dx * dx * task.q) + np.sum(du * du * task.r))
+    out = {"cost": cost, "failed": float(terminated), "seconds": len(states) * sim.dt}
+    for i, rms in zip(np.flatnonzero(task.q > 0), _rms(dx[:, task.q > 0]), strict=True):
+        name, value = _in_user_units(model.state_names[i], model.state_units[i], float(rms))
+        out[f"rms_{name}"] = value
+    for j, rms in enumerate(_rms(du)):
+        name, value = _in_user_units(model.input_names[j], model.input_units[j], float(rms))
+        out[f"rms_{name}"] = value
+    out["saturated"] = float(np.mean(clipped))
+    if estimates is not None:
+        miss = estimates[:, :dx.shape[1]] - states
+        angles = [i for i, u in enumerate(model.state_units) if u == "rad"]
+        miss[:, angles] = np.angle(np.exp(1j * miss[:, angles]))  # wrapped estimates
+        for i, rms in enumerate(_rms(miss)):
+            name, value = _in_user_units(model.state_names[i], model.state_units[i], float(rms))
+            out[f"estimation_rms_{name}"] = value
+    return out
+
+
+# -- estimators by name ------------------------------------------------------------------------
+
+#: ``name -> factory(vector env) -> estimator``; a factory raises ValueError where it does not
+#: apply (e.g. seed 000's observer off the USV).
+ESTIMATORS: dict[str, Callable[[Any], Any]] = {}
+#: Observations that are not an estimator's: the true state (oracle) and the raw sensors.
+ORACLE, RAW = "true", "raw"
+
+
+def register_estimator(name: str, factory: Callable[[Any], Any]) -> None:
+    """Make ``name`` an estimator of :func:`observe` (and so of ``marine bench``).
+
+    :param factory: ``env -> estimator`` (:class:`estimators.base.Estimator`), given the
+        native vector env; raise ValueError if it does not apply to that vehicle.
+    """
+    if name in (ORACLE, RAW) or not name.isidentifier():
+        raise ValueError(f"estimator name {name!r} is invalid: an identifier, not "
+                         f"{ORACLE!r} or {RAW!r}")
+    ESTIMATORS[name] = factory
+
+
+def _kf(env: Any) -> Any:
+    from estimators import KalmanFilter
+
+    return KalmanFilter.for_env(env)
+
+
+def _akf(env: Any) -> Any:
+    """Seed 001's adaptive filter: process noise switched between the sea's own (``Q_min``)
+    and ten times it (seed 001's WQmax / WQmin)."""
+    from estimators import AdaptiveKalmanFilter
+    from estimators.kalman import default_process_noise
+
+    Q = default_process_noise(env.unwrapped.sim)
+    return AdaptiveKalmanFilter.for_env(env, Q=Q, Q_max=10 * Q)
+
+
+def _ekf(env: Any) -> Any:
+    from estimators import ExtendedKalmanFilter
+
+    return ExtendedKalmanFilter.for_env(env)
+
+
+def _pd_observer(env: Any) -> Any:
+    """Seed 000's quantized-signal PD observer (LMI design; the USV only)."""
+    from estimators import QuantizedPDObserver
+    from marine_envs.models import USVModel
+
+    sim = env.unwrapped.sim
+    if not isinstance(sim.model, USVModel):
+        raise ValueError(f"seed 000's PD observer is designed for the USV, not {sim.model.name}")
+    return QuantizedPDObserver.for_usv(sim.model, mu2=0.01, dt=sim.dt)
+
+
+for _name, _factory in (("kf", _kf), ("akf", _akf), ("ekf", _ekf), ("pd", _pd_observer)):
+    register_estimator(_name, _factory)
+
+
+def observe(venv: Any, estimator: str) -> Any:
+    """``venv`` as the controller sees it through ``estimator``: ``"true"`` (the true state),
+    ``"raw"`` (the sensors themselves) or a registered estimator's estimate."""
+    from estimators import TrueStateWrapper, wrap
+
+    if estimator == ORACLE:
+        return TrueStateWrapper(venv)
+    if estimator == RAW:
+        return venv
+    if estimator not in ESTIMATORS:
+        raise ValueError(f"estimator={estimator!r} is unknown: one of "
+                         f"{(ORACLE, RAW, *ESTIMATORS)}")
+    return wrap(venv, ESTIMATORS[estimator](venv))
+
+
+# -- policies by name --------------------------------------------------------------------------
+
+class NominalInput:
+    """The vehicle's nominal (trim) input whatever it sees: the do-nothing baseline."""
+
+    def __init__(self, env: Any) -> None:
+        self.action = env.unwrapped.sim.nominal_action().astype(np.float32)
+
+    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, None]:
+        obs = np.asarray(observation)
+        return np.broadcast_to(self.action, (*obs.shape[:-1], self.action.size)).copy(), None
+
+
+def lqr_for(venv: Any, estimator: str) -> Any:
+    """The task's discrete LQR acting on what ``estimator`` gives (see :func:`observe`)."""
+    from .lqr import LQRPolicy
+
+    return LQRPolicy.for_env(venv, observed="state" if estimator == ORACLE else "auto")
+
+
+# -- evaluation --------------------------------------------------------------------------------
+
+def make_env(env_id: str, episodes: int, estimator: str = RAW,
+             env_kwargs: Mapping[str, Any] | None = None,
+             max_episode_steps: int | None = None) -> Any:
+    """``episodes`` boats of ``env_id`` in one native vector env, seen through ``estimator``.
+
+    :param max_episode_steps: episode length, steps (default: the registered one).
+    """
+    steps = max_episode_steps or gym.spec(env_id).max_episode_steps
+    venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point",
+                        max_episode_steps=steps, **dict(env_kwargs or {}))
+    return observe(venv, estimator)
+
+
+def evaluate(env_id: str, policy: str | Callable[[Any], Any], estimator: str = RAW,
+             seeds: Sequence[int] | int = 5, env_kwargs: Mapping[str, Any] | None = None,
+             max_episode_steps: int | None = None,
+             progress: Callable[[int], None] | None = None) -> list[dict[str, float]]:
+    """Score ``policy`` on ``env_id`` behind ``estimator``, one episode per seed.
+
+    :param policy: ``"lqr"``, ``"nominal"``, or ``venv -> policy`` (e.g. an SB3 agent's
+        factory); the policy must take a batch of observations.
+    :param estimator: see :func:`observe`.
+    :param seeds: the episodes' seeds (consecutive: one batch), or a count from 0.
+    :return: one :func:`episode_metrics` dict per seed, with its ``seed``.
+    """
+    seeds = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
+    if not seeds or seeds != list(range(seeds[0], seeds[0] + len(seeds))):
+        raise ValueError(f"seeds={seeds!r} is invalid: consecutive integers (one batch)")
+    venv = make_env(env_id, len(seeds), estimator, env_kwargs, max_episode_steps)
+    if policy == "lqr":
+        actor = lqr_for(venv, estimator)
+    elif policy == "nominal":
+        actor = NominalInput(venv)
+    elif callable(policy):
+        actor = policy(venv)
+    else:
+        raise ValueError(f"policy={policy!r} is invalid: 'lqr', 'nominal' or a factory")
+    steps = max_episode_steps or gym.spec(env_id).max_episode_steps
+    result = rollout(venv, actor, steps, seeds[0], progress)
+    sim = venv.unwrapped.sim
+    estimated = estimator not in (ORACLE, RAW)
+    venv.close()
+    rows = []
+    for i, seed in enumerate(seeds):
+        ep = result.episode(i)
+        rows.append({"seed": seed, **episode_metrics(
+            sim, ep["states"], ep["inputs"], ep["clipped"], ep["terminated"],
+            ep["observations"] if estimated else None)})
+    return rows

@@ -26,16 +26,21 @@ from stable_baselines3 import A2C, PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import CheckpointCallback
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecMonitor, VecNormalize
+from stable_baselines3.common.vec_env import (
+    DummyVecEnv,
+    VecEnv,
+    VecEnvWrapper,
+    VecMonitor,
+    VecNormalize,
+)
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
 import marine_envs
 
-from .episode import EPISODE_ESTIMATORS, make_estimator
-from .evaluation import run_episode
+from . import evaluation
+from .evaluation import ORACLE, RAW
 
 ALGOS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C}
-ESTIMATORS = (None, *EPISODE_ESTIMATORS)
 BACKENDS = ("native", "dummy")
 HYPERPARAMS = Path(__file__).with_name("hyperparams.yaml")
 #: Algorithms that learn from fresh rollouts: their returns, not only observations, are scaled.
@@ -52,7 +57,8 @@ def _check_choice(name: str, value: Any, choices: Sequence[Any]) -> None:
 def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[str, Any]:
     """The settings of ``algo`` on ``env_id``: the file's ``default`` section for ``algo``,
     updated with the env's own entry. Keys: ``n_timesteps``, ``n_envs``, ``policy``,
-    ``normalize``, optional ``policy_kwargs``, and algorithm keyword arguments."""
+    ``normalize`` (a bool or ``VecNormalize``'s keyword arguments), optional ``policy_kwargs``
+    and ``failure_penalty`` (:class:`FailurePenalty`), and algorithm keyword arguments."""
     _check_choice("env_id", env_id, tuple(marine_envs.ENVIRONMENTS))
     _check_choice("algo", algo, tuple(ALGOS))
     import yaml  # here: only reading the settings needs PyYAML
@@ -185,13 +191,48 @@ class SB3VecEnv(VecEnv):
         return obs
 
 
+class FailurePenalty(VecEnvWrapper):
+    """Subtract ``penalty`` (reward units) from the reward of a step that ends its episode by
+    failure (``terminated``, not the time limit).
+
+    The marine rewards are minus a cost, so without it an agent on an unstable craft (the
+    hydrofoil) learns that crashing early is cheapest. Training only: evaluation scores the
+    task's own cost and reports failures apart.
+    """
+
+    def __init__(self, venv: VecEnv, penalty: float) -> None:
+        if not (math.isfinite(penalty) and penalty >= 0):
+            raise ValueError(f"failure_penalty={penalty!r} is invalid: a finite number >= 0")
+        super().__init__(venv)
+        self.penalty = float(penalty)
+
+    def reset(self) -> VecEnvObs:
+        return self.venv.reset()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        failed = [bool(d and not info.get("TimeLimit.truncated", False))
+                  for d, info in zip(dones, infos, strict=True)]
+        return obs, rewards - self.penalty * np.asarray(failed, dtype=np.float32), dones, infos
+
+
 # -- building environments ------------------------------------------------------------------
+
+def estimator_choices() -> tuple[str | None, ...]:
+    """What an agent may see: None (= ``"raw"``, the sensors), ``"true"`` (the true state) or
+    a registered estimator (:data:`agents.evaluation.ESTIMATORS`)."""
+    return (None, ORACLE, RAW, *evaluation.ESTIMATORS)
+
 
 def _single_env(env_id: str, estimator: str | None, max_episode_steps: int | None) -> gym.Env:
     from estimators import EstimatorWrapper
 
     env = gym.make(env_id, max_episode_steps=max_episode_steps)
-    return env if estimator is None else EstimatorWrapper(env, make_estimator(estimator, env))
+    if estimator in (None, RAW):
+        return env
+    if estimator == ORACLE:
+        raise ValueError("the dummy backend has no true-state observation; use backend='native'")
+    return EstimatorWrapper(env, evaluation.ESTIMATORS[estimator](env))
 
 
 def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: int = 0,
@@ -199,13 +240,13 @@ def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: i
     """``n_envs`` copies of ``env_id`` as an SB3 ``VecEnv`` with episode statistics
     (``info["episode"]``), seeded ``seed, seed + 1, ...`` at their first reset.
 
-    :param estimator: None (the agent sees the sensors), ``"kf"`` or ``"ekf"``.
+    :param estimator: what the agent sees (:func:`estimator_choices`), e.g. ``"kf"``.
     :param backend: ``"native"``: the batched env through :class:`SB3VecEnv`; ``"dummy"``:
         SB3's ``DummyVecEnv`` of single envs (same numbers, slower).
     :param max_episode_steps: episode length, steps (default: the registered one).
     """
     _check_choice("env_id", env_id, tuple(marine_envs.ENVIRONMENTS))
-    _check_choice("estimator", estimator, ESTIMATORS)
+    _check_choice("estimator", estimator, estimator_choices())
     _check_choice("backend", backend, BACKENDS)
     if not (isinstance(n_envs, int) and n_envs >= 1):
         raise ValueError(f"n_envs={n_envs!r} is invalid: an integer >= 1")
@@ -214,12 +255,8 @@ def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: i
         venv: VecEnv = DummyVecEnv([lambda: Monitor(_single_env(env_id, estimator, steps))
                                     for _ in range(n_envs)])
     else:
-        from estimators import wrap
-
-        native = gym.make_vec(env_id, num_envs=n_envs, vectorization_mode="vector_entry_point",
-                              max_episode_steps=steps)
-        if estimator is not None:
-            native = wrap(native, make_estimator(estimator, native))
+        native = evaluation.make_env(env_id, n_envs, estimator or RAW,
+                                     max_episode_steps=steps)
         venv = VecMonitor(SB3VecEnv(native))
     venv.seed(seed)
     return venv
@@ -258,7 +295,7 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
         numpy's made training 20x slower on 2 cores.
     """
     _check_choice("algo", algo, tuple(ALGOS))
-    _check_choice("estimator", estimator, ESTIMATORS)
+    _check_choice("estimator", estimator, estimator_choices())
     _check_choice("backend", backend, BACKENDS)
     params = {**load_hyperparams(env_id, algo), **dict(hyperparams or {})}
     yaml_timesteps, yaml_envs = params.pop("n_timesteps"), params.pop("n_envs")
@@ -269,13 +306,20 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
     config = {"env_id": env_id, "algo": algo, "estimator": estimator, "seed": seed,
               "n_envs": n_envs, "backend": backend, "max_episode_steps": max_episode_steps,
               "hyperparams": copy.deepcopy(params)}
-    policy, normalize = params.pop("policy"), bool(params.pop("normalize", False))
+    policy, normalize = params.pop("policy"), params.pop("normalize", False)
+    # normalize: a bool, or VecNormalize's keyword arguments (RL-Zoo style)
+    normalize_kwargs = dict(normalize) if isinstance(normalize, Mapping) else {}
+    normalize = bool(normalize)
+    penalty = float(params.pop("failure_penalty", 0.0))
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     venv = make_vec_env(env_id, n_envs, estimator, seed, backend, max_episode_steps)
+    if penalty:
+        venv = FailurePenalty(venv, penalty)
     if normalize:  # rewards too only on-policy: a replay buffer would keep stale scales
-        venv = VecNormalize(venv, gamma=params.get("gamma", 0.99),
-                            norm_reward=algo in ON_POLICY)
+        normalize_kwargs = {"gamma": params.get("gamma", 0.99), "norm_reward": algo in ON_POLICY,
+                            **normalize_kwargs}
+        venv = VecNormalize(venv, **normalize_kwargs)
     tensorboard = str(out / "tb") if _importable("tensorboard") else None
     model = ALGOS[algo](policy, venv, seed=seed, device="cpu", verbose=0,
                         tensorboard_log=tensorboard, **params)
@@ -336,20 +380,17 @@ def load_agent(out: Path) -> Agent:
     return Agent(model, normalizer, config)
 
 
-def evaluate(out: Path, episodes: int = 5, seed: int = 0) -> dict[str, Any]:
-    """Run the agent saved in ``out`` for ``episodes`` episodes of seeds ``seed, seed + 1,
-    ...`` on a single env (behind the training estimator).
+def evaluate(out: Path, episodes: int = 5, seed: int = 0) -> list[dict[str, float]]:
+    """Score the agent saved in ``out`` on ``episodes`` episodes of seeds ``seed, seed + 1,
+    ...``, behind its training estimator (:func:`agents.evaluation.evaluate`).
 
-    :return: ``mean_return``, ``std_return`` and per-episode ``returns`` (reward units).
+    :return: one row of :func:`~agents.evaluation.episode_metrics` per episode (cost,
+        failures, RMS errors, actuator usage, estimation errors), with its ``seed``.
     """
     if not (isinstance(episodes, int) and episodes >= 1):
         raise ValueError(f"episodes={episodes!r} is invalid: an integer >= 1")
     agent = load_agent(out)
     config = agent.config
-    env = _single_env(config["env_id"], config["estimator"], config.get("max_episode_steps"))
-    steps = config.get("max_episode_steps") or gym.spec(config["env_id"]).max_episode_steps
-    returns = [run_episode(env, agent, steps, seed=seed + k).episode_return
-               for k in range(episodes)]
-    env.close()
-    return {"mean_return": float(np.mean(returns)), "std_return": float(np.std(returns)),
-            "returns": returns, "episodes": episodes, "seed": seed}
+    return evaluation.evaluate(config["env_id"], lambda venv: agent,
+                               config["estimator"] or RAW, range(seed, seed + episodes),
+                               max_episode_steps=config.get("max_episode_steps"))

@@ -13,7 +13,8 @@
   :func:`design_pd_observer` (needs cvxpy: ``pip install "marine-envs[estimators]"``):
   :mod:`estimators.pd_observer`; the classical :class:`LuenbergerObserver`:
   :mod:`estimators.luenberger`;
-* :class:`EstimatorWrapper`, :class:`VectorEstimatorWrapper` and :func:`wrap`:
+* :class:`EstimatorWrapper`, :class:`VectorEstimatorWrapper`, :func:`wrap` and the oracle
+  :class:`TrueStateWrapper`:
   :mod:`estimators.wrappers`.
 
 Every estimator follows :class:`estimators.base.Estimator` (ARCHITECTURE.md contract 3).
@@ -25,9 +26,10 @@ from .kalman import AdaptiveKalmanFilter, KalmanFilter
 from .luenberger import LuenbergerObserver
 from .pd_observer import LMIInfeasibleError, QuantizedPDObserver, design_pd_observer
 from .wave_frequency import AdaptiveWaveFilter, WaveFilter, WaveFrequencyWrapper
-from .wrappers import EstimatorWrapper, VectorEstimatorWrapper, wrap
+from .wrappers import EstimatorWrapper, TrueStateWrapper, VectorEstimatorWrapper, wrap
 
 __all__ = ["AdaptiveKalmanFilter", "AdaptiveWaveFilter", "Estimator", "EstimatorWrapper",
            "ExtendedKalmanFilter", "KalmanFilter", "LMIInfeasibleError", "LuenbergerObserver",
-           "QuantizedPDObserver", "UnscentedKalmanFilter", "VectorEstimatorWrapper", "WaveFilter",
-           "WaveFrequencyWrapper", "design_pd_observer", "rts_smooth", "wrap"]
+           "QuantizedPDObserver", "TrueStateWrapper", "UnscentedKalmanFilter",
+           "VectorEstimatorWrapper", "WaveFilter", "WaveFrequencyWrapper", "design_pd_observer",
+           "rts_smooth", "wrap"]

@@ -165,3 +165,40 @@ def wrap(env: gym.Env | VectorEnv, estimator: Estimator, **kwargs: Any):
     """:class:`VectorEstimatorWrapper` for a vector environment, else :class:`EstimatorWrapper`."""
     cls = VectorEstimatorWrapper if isinstance(env, VectorEnv) else EstimatorWrapper
     return cls(env, estimator, **kwargs)
+
+
+class TrueStateWrapper(VectorWrapper):
+    """A marine vector environment whose observation is the true state (``info["state"]``):
+    the oracle a perfect estimator would give, the lower bound of an estimator comparison.
+
+    Same interface as :class:`VectorEstimatorWrapper` (``restart`` included), so controllers
+    and SB3 agents take it wherever they take an estimate.
+    """
+
+    def __init__(self, env: VectorEnv) -> None:
+        super().__init__(env)
+        model = env.unwrapped.sim.model
+        self.state_names = tuple(model.state_names)
+        big = np.finfo(np.float32).max
+        self.single_observation_space = spaces.Box(-big, big, (len(self.state_names),),
+                                                   dtype=np.float32)
+        self.observation_space = batch_space(self.single_observation_space, env.num_envs)
+
+    def _state(self) -> NDArray[np.float32]:
+        return self.env.unwrapped.sim.x.astype(np.float32)
+
+    def reset(self, *, seed: int | list[int | None] | None = None,
+              options: dict[str, Any] | None = None):
+        _, info = self.env.reset(seed=seed, options=options)
+        return self._state(), info
+
+    def step(self, actions):
+        _, reward, terminated, truncated, info = self.env.step(actions)
+        return self._state(), reward, terminated, truncated, info
+
+    def restart(self, idx: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Start new episodes of boats ``idx`` now; returns their true states and an all-valid
+        mask (see ``MarineVectorEnv.restart``)."""
+        idx = np.asarray(idx, dtype=np.intp)
+        self.env.restart(idx)
+        return self._state()[idx], np.ones((idx.size, len(self.state_names)), dtype=bool)

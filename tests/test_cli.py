@@ -91,7 +91,8 @@ def test_episode_prints_rms_errors_and_writes_a_plot(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "rms_north_lf" in out and plot.stat().st_size > 10_000
     summary = json.loads((tmp_path / "s.json").read_text())
-    assert summary["seconds"] == pytest.approx(30.0) and summary["terminated"] == 0.0
+    assert summary["seconds"] == pytest.approx(30.0) and summary["failed"] == 0.0
+    assert summary["cost"] == pytest.approx(-summary["return"], rel=1e-9)
     assert main(["episode", "marine_envs/ROV-v0", "--seconds", "-1"]) == 2
     assert "seconds=-1" in capsys.readouterr().err
 
@@ -102,7 +103,7 @@ def test_episode_with_a_kalman_filter_controls_the_dp_vessel_on_its_estimate(tmp
     assert main(["episode", "marine_envs/DPVessel-v0", "--policy", "lqr", "--estimator", "kf",
                  "--seconds", "100", "--json", str(out)]) == 0
     summary = json.loads(out.read_text())
-    assert summary["terminated"] == 0.0
+    assert summary["failed"] == 0.0
     assert 0 < summary["estimation_rms_north_lf"] < 2.0
     assert main(["episode", "marine_envs/DPVessel-v0", "--policy", "lqr"]) == 2
     assert "wrap the environment in an estimator" in capsys.readouterr().err

@@ -95,14 +95,15 @@ def test_train_load_evaluate(tmp_path):
     action, _ = agent.predict(obs)
     assert action.shape == agent.model.action_space.shape
     first, second = evaluate(out, episodes=2), evaluate(out, episodes=2)
-    assert len(first["returns"]) == 2 and np.isfinite(first["returns"]).all()
-    assert np.isfinite(first["mean_return"]) and np.isfinite(first["std_return"])
+    assert [row["seed"] for row in first] == [0, 1]
+    assert all(np.isfinite(row["cost"]) and row["cost"] > 0 for row in first)
+    assert "estimation_rms_phi_deg" in first[0] and "rms_delta_deg" in first[0]
     assert first == second
 
 
 @pytest.mark.parametrize(("kwargs", "message"), [
     ({"algo": "dqn"}, "ppo"),
-    ({"estimator": "ukf"}, "ekf"),
+    ({"estimator": "ukf"}, "akf"),
     ({"backend": "async"}, "dummy"),
     ({"timesteps": 0}, "timesteps"),
     ({"env_id": "marine_envs/Nope-v0"}, "USV-v0"),
@@ -121,7 +122,8 @@ def test_cli_trains_and_evaluates(tmp_path, capsys):
     assert main(["train", USV, "--estimator", "kf", "--timesteps", "256", "--n-envs", "2",
                  "--out", str(out), "--quiet"]) == 0
     assert "saved to" in capsys.readouterr().out and (out / "model.zip").exists()
-    assert main(["evaluate", str(out), "--episodes", "1"]) == 0
-    assert "return over 1 episodes" in capsys.readouterr().out
+    assert main(["evaluate", str(out), "--episodes", "1", "--json", str(tmp_path / "e.json")]) == 0
+    assert "cost" in capsys.readouterr().out
+    assert len(json.loads((tmp_path / "e.json").read_text())["rows"]) == 1
     assert main(["train", USV, "--algo", "dqn", "--out", str(out)]) == 2
     assert "ppo" in capsys.readouterr().err
