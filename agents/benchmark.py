@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import base64
 import dataclasses
+import itertools
 import json
 import math
 import os
@@ -25,6 +26,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import pandas as pd
 
@@ -105,21 +107,12 @@ class Grid:
 
     def cells(self) -> list[dict[str, str]]:
         return [dict(zip(KEYS, values, strict=True))
-                for values in _product(self.vehicles, self.estimators, self.controllers,
-                                       self.seas, self.sensors)]
+                for values in itertools.product(self.vehicles, self.estimators, self.controllers,
+                                                self.seas, self.sensors)]
 
     def settings(self) -> dict[str, Any]:
         """What makes rows comparable across runs (a resumed grid must match)."""
         return {"seeds": self.seeds, "seconds": self.seconds, "timesteps": self.timesteps}
-
-
-def _product(*axes: Sequence[str]) -> Iterator[tuple[str, ...]]:
-    if not axes:
-        yield ()
-        return
-    for head in axes[0]:
-        for rest in _product(*axes[1:]):
-            yield (head, *rest)
 
 
 def parse_sensor(spec: str) -> dict[str, float]:
@@ -150,8 +143,6 @@ def parse_sensor(spec: str) -> dict[str, float]:
 def sensor_kwargs(env_id: str, spec: str, sea: Mapping[str, Any]) -> dict[str, Any]:
     """The environment arguments of sensor degradation ``spec`` (see :data:`DEGRADATIONS`),
     relative to the environment's default noise."""
-    import gymnasium as gym
-
     from marine_envs.sensors import GaussianNoise
 
     levels = parse_sensor(spec)
@@ -185,16 +176,17 @@ def _agent_dir(out: Path, vehicle: str, estimator: str, algo: str) -> Path:
 
 
 def train_agent(out: Path, vehicle: str, estimator: str, algo: str, timesteps: int) -> str | None:
-    """Train (or find already trained) the grid's agent; None if done, else why it cannot be."""
+    """Train the grid's agent into its directory; None if done, else why it cannot be (also
+    written to ``untrainable.txt`` there, for the cells that wanted it)."""
     from .sb3 import train
 
     path = _agent_dir(out, vehicle, estimator, algo)
-    if (path / "model.zip").exists():
-        return None
     try:
         train(VEHICLES[vehicle], algo, estimator, timesteps, path, seed=TRAINING_SEED,
               progress_bar=False)
-    except (ValueError, ImportError) as error:
+    except (ValueError, ImportError, FloatingPointError) as error:
+        path.mkdir(parents=True, exist_ok=True)
+        (path / "untrainable.txt").write_text(str(error))
         return str(error)
     return None
 
@@ -227,22 +219,22 @@ def run_cell(cell: Mapping[str, str], settings: Mapping[str, Any], out: str) -> 
         if controller in SB3_ALGOS:
             path = _agent_dir(Path(out), vehicle, estimator, controller)
             if not (path / "model.zip").exists():
-                raise ValueError("its agent could not be trained")
+                why = path / "untrainable.txt"
+                raise ValueError("its agent could not be trained: " +
+                                 (why.read_text() if why.exists() else "no model.zip"))
             policy: Any = lambda venv: load_agent(path)  # noqa: E731
         elif controller.startswith("sb3:"):
             agent = _saved_agent(controller, vehicle, estimator)
             policy = lambda venv: agent  # noqa: E731
         else:
             policy = controller
-        import gymnasium as gym
-
         steps = None
         if settings["seconds"] is not None:
             dt = gym.make(env_id, **sea).unwrapped.dt
             steps = max(1, round(settings["seconds"] / dt))
         kwargs = {**sea, **sensor_kwargs(env_id, cell["sensor"], sea)}
         rows = evaluate(env_id, policy, estimator, settings["seeds"], kwargs, steps)
-    except (ValueError, ImportError) as error:
+    except (ValueError, ImportError, FloatingPointError) as error:  # a diverged model too
         return [{**cell, "status": f"n/a: {error}"}]
     return [{**cell, "status": "ok", **row} for row in rows]
 

@@ -64,6 +64,7 @@ outputs (in --out):
 on a Ray cluster: start it (ray start --head on one machine, ray start --address HEAD:6379 on
 the others, each with marine-envs installed), then run on any of them:
   marine bench --backend ray --address auto --seeds 20 --sensors default noise=4 noise=16
+(with --controllers ppo, --out must be on a filesystem all machines share: tasks save agents)
 """
 
 

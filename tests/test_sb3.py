@@ -127,3 +127,23 @@ def test_cli_trains_and_evaluates(tmp_path, capsys):
     assert len(json.loads((tmp_path / "e.json").read_text())["rows"]) == 1
     assert main(["train", USV, "--algo", "dqn", "--out", str(out)]) == 2
     assert "ppo" in capsys.readouterr().err
+
+
+def test_a_failure_costs_the_penalty_and_the_time_limit_does_not():
+    from agents.sb3 import FailurePenalty
+
+    venv = make_vec_env("marine_envs/Hydrofoil-v0", 2, seed=0, max_episode_steps=400)
+    plain = make_vec_env("marine_envs/Hydrofoil-v0", 2, seed=0, max_episode_steps=400)
+    penalised = FailurePenalty(venv, 100.0)
+    penalised.reset(), plain.reset()
+    action = np.zeros((2, 2), dtype=np.float32)  # foils held: the unstable craft broaches
+    for _ in range(400):
+        _, reward, done, infos = penalised.step(action)
+        _, base, _, _ = plain.step(action)
+        failed = done & ~np.array([i.get("TimeLimit.truncated", False) for i in infos])
+        np.testing.assert_allclose(reward, base - 100.0 * failed, rtol=1e-6)
+        if failed.any():
+            break
+    assert failed.any()
+    with pytest.raises(ValueError, match="failure_penalty"):
+        FailurePenalty(plain, -1.0)
