@@ -140,15 +140,14 @@ def parse_sensor(spec: str) -> dict[str, float]:
     return out
 
 
-def sensor_kwargs(env_id: str, spec: str, sea: Mapping[str, Any]) -> dict[str, Any]:
+def sensor_kwargs(spec: str, sensors: Any) -> dict[str, Any]:
     """The environment arguments of sensor degradation ``spec`` (see :data:`DEGRADATIONS`),
-    relative to the environment's default noise."""
+    relative to the default noise of ``sensors`` (the environment's ``SensorSuite``)."""
     from marine_envs.sensors import GaussianNoise
 
     levels = parse_sensor(spec)
     if not levels:
         return {}
-    sensors = gym.make(env_id, **sea).unwrapped.sim.sensors
     noise = [s.std for s in sensors.stages if isinstance(s, GaussianNoise)]
     std = noise[0] if noise else np.zeros(len(sensors.channels))
     per_channel = lambda k: {c: float(k * s) for c, s in zip(sensors.channels, std,  # noqa: E731
@@ -228,11 +227,10 @@ def run_cell(cell: Mapping[str, str], settings: Mapping[str, Any], out: str) -> 
             policy = lambda venv: agent  # noqa: E731
         else:
             policy = controller
-        steps = None
-        if settings["seconds"] is not None:
-            dt = gym.make(env_id, **sea).unwrapped.dt
-            steps = max(1, round(settings["seconds"] / dt))
-        kwargs = {**sea, **sensor_kwargs(env_id, cell["sensor"], sea)}
+        sim = gym.make(env_id, **sea).unwrapped.sim  # its period and default sensors
+        steps = None if settings["seconds"] is None else \
+            max(1, round(settings["seconds"] / sim.dt))
+        kwargs = {**sea, **sensor_kwargs(cell["sensor"], sim.sensors)}
         rows = evaluate(env_id, policy, estimator, settings["seeds"], kwargs, steps)
     except (ValueError, ImportError, FloatingPointError) as error:  # a diverged model too
         return [{**cell, "status": f"n/a: {error}"}]
@@ -340,8 +338,8 @@ def run_grid(grid: Grid, out: Path, backend: str = "local", workers: int = 2,
                      if c["controller"] in SB3_ALGOS})
     training = [(train_agent, (out, v, e, a, grid.timesteps)) for v, e, a in agents
                 if not (_agent_dir(out, v, e, a) / "model.zip").exists()]
-    for _ in _progress(execute(training), len(training), "training agents", progress):
-        pass
+    # a failed training leaves its reason for the cells that wanted the agent (run_cell)
+    list(_progress(execute(training), len(training), "training agents", progress))
     settings = grid.settings()
     cells = [(run_cell, (cell, settings, str(out))) for cell in todo]
     for rows in _progress(execute(cells), len(cells), "grid cells", progress):

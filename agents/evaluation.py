@@ -137,7 +137,8 @@ def rollout(venv: Any, policy: Any, steps: int, seed: int,
 # -- what an episode scores --------------------------------------------------------------------
 
 def _in_user_units(name: str, unit: str, value: float) -> tuple[str, float]:
-    """``rms_<name>`` in SI, or ``rms_<name>_deg`` in degrees where the unit is rad(/s)."""
+    """``(name, value)`` in SI, or ``(name + "_deg", value in degrees)`` where the unit is
+    rad or rad/s."""
     if unit.startswith("rad"):
         return f"{name}_deg", math.degrees(value)
     return name, value
@@ -279,6 +280,11 @@ def lqr_for(venv: Any, estimator: str) -> Any:
 
 # -- evaluation --------------------------------------------------------------------------------
 
+def episode_steps(env_id: str, max_episode_steps: int | None = None) -> int:
+    """``max_episode_steps``, or the registered episode length of ``env_id``."""
+    return max_episode_steps or gym.spec(env_id).max_episode_steps
+
+
 def make_env(env_id: str, episodes: int, estimator: str = RAW,
              env_kwargs: Mapping[str, Any] | None = None,
              max_episode_steps: int | None = None) -> Any:
@@ -286,9 +292,9 @@ def make_env(env_id: str, episodes: int, estimator: str = RAW,
 
     :param max_episode_steps: episode length, steps (default: the registered one).
     """
-    steps = max_episode_steps or gym.spec(env_id).max_episode_steps
     venv = gym.make_vec(env_id, num_envs=episodes, vectorization_mode="vector_entry_point",
-                        max_episode_steps=steps, **dict(env_kwargs or {}))
+                        max_episode_steps=episode_steps(env_id, max_episode_steps),
+                        **dict(env_kwargs or {}))
     return observe(venv, estimator)
 
 
@@ -307,7 +313,8 @@ def evaluate(env_id: str, policy: str | Callable[[Any], Any], estimator: str = R
     seeds = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
     if not seeds or seeds != list(range(seeds[0], seeds[0] + len(seeds))):
         raise ValueError(f"seeds={seeds!r} is invalid: consecutive integers (one batch)")
-    venv = make_env(env_id, len(seeds), estimator, env_kwargs, max_episode_steps)
+    steps = episode_steps(env_id, max_episode_steps)
+    venv = make_env(env_id, len(seeds), estimator, env_kwargs, steps)
     if policy == "lqr":
         actor = lqr_for(venv, estimator)
     elif policy == "nominal":
@@ -316,7 +323,6 @@ def evaluate(env_id: str, policy: str | Callable[[Any], Any], estimator: str = R
         actor = policy(venv)
     else:
         raise ValueError(f"policy={policy!r} is invalid: 'lqr', 'nominal' or a factory")
-    steps = max_episode_steps or gym.spec(env_id).max_episode_steps
     result = rollout(venv, actor, steps, seeds[0], progress)
     sim = venv.unwrapped.sim
     estimated = estimator not in (ORACLE, RAW)

@@ -250,7 +250,7 @@ def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: i
     _check_choice("backend", backend, BACKENDS)
     if not (isinstance(n_envs, int) and n_envs >= 1):
         raise ValueError(f"n_envs={n_envs!r} is invalid: an integer >= 1")
-    steps = max_episode_steps or gym.spec(env_id).max_episode_steps
+    steps = evaluation.episode_steps(env_id, max_episode_steps)
     if backend == "dummy":
         venv: VecEnv = DummyVecEnv([lambda: Monitor(_single_env(env_id, estimator, steps))
                                     for _ in range(n_envs)])
