@@ -181,8 +181,10 @@ def train_agent(out: Path, vehicle: str, estimator: str, algo: str, timesteps: i
 
     path = _agent_dir(out, vehicle, estimator, algo)
     try:
+        # the grid's own budget, last iterate: validating on full episodes (the YAML's
+        # validation_episodes) would cost more than training at a small --timesteps
         train(VEHICLES[vehicle], algo, estimator, timesteps, path, seed=TRAINING_SEED,
-              progress_bar=False)
+              progress_bar=False, hyperparams={"validation_episodes": 0})
     except (ValueError, ImportError, FloatingPointError) as error:
         path.mkdir(parents=True, exist_ok=True)
         (path / "untrainable.txt").write_text(str(error))

@@ -190,6 +190,11 @@ def _train(args: argparse.Namespace) -> int:
                    args.seed, args.n_envs, args.backend, progress_bar=not args.quiet)
     print(f"trained {result.timesteps} steps in {result.wall_seconds:.1f} s "
           f"({result.steps_per_second:.0f} steps/s); saved to {result.out}")
+    if result.selected is not None:
+        best = result.selected
+        print(f"model.zip is the agent of {best['timesteps']} steps, the best on validation "
+              f"({best['failed']} failed, mean cost {best['cost']:.4g}); the last is "
+              "last_model.zip")
     return 0
 
 
@@ -377,7 +382,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Train an SB3 agent on the native batched environment, optionally behind "
                     "a state estimator. Hyperparameters per vehicle and algorithm come from "
                     "agents/hyperparams.yaml (RL-Zoo style); writes model.zip, config.json, "
-                    "vecnormalize.pkl (if normalised) and checkpoints/ into --out.")
+                    "vecnormalize.pkl (if normalised) and checkpoints/ into --out. Where the "
+                    "settings give validation_episodes, model.zip is the checkpoint that did "
+                    "best on them (fewest failures, then least cost) and last_model.zip the "
+                    "last.")
     train.add_argument("env_id", help="environment id, e.g. marine_envs/USV-v0")
     train.add_argument("--algo", default="ppo", help="ppo, sac, td3 or a2c (default ppo)")
     train.add_argument("--estimator",

@@ -24,7 +24,7 @@ import torch
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from stable_baselines3 import A2C, PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import CheckpointCallback
+from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import (
     DummyVecEnv,
@@ -45,6 +45,9 @@ BACKENDS = ("native", "dummy")
 HYPERPARAMS = Path(__file__).with_name("hyperparams.yaml")
 #: Algorithms that learn from fresh rollouts: their returns, not only observations, are scaled.
 ON_POLICY = ("ppo", "a2c")
+#: First seed of the validation episodes: apart from training's (``seed``, ...) and from the
+#: evaluation seeds (0, 1, ... in ``marine evaluate`` and ``marine bench``).
+VALIDATION_SEED = 100_000
 
 
 # -- validation and hyperparameters ---------------------------------------------------------
@@ -57,8 +60,10 @@ def _check_choice(name: str, value: Any, choices: Sequence[Any]) -> None:
 def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[str, Any]:
     """The settings of ``algo`` on ``env_id``: the file's ``default`` section for ``algo``,
     updated with the env's own entry. Keys: ``n_timesteps``, ``n_envs``, ``policy``,
-    ``normalize`` (a bool or ``VecNormalize``'s keyword arguments), optional ``policy_kwargs``
-    and ``failure_penalty`` (:class:`FailurePenalty`), and algorithm keyword arguments."""
+    ``normalize`` (a bool or ``VecNormalize``'s keyword arguments), optional ``policy_kwargs``,
+    ``failure_penalty`` (:class:`FailurePenalty`) and ``validation_episodes``
+    (:class:`KeepBest`), and algorithm keyword arguments (``learning_rate`` and ``clip_range``
+    may be RL-Zoo's ``"lin_<x>"``: decayed linearly to 0)."""
     _check_choice("env_id", env_id, tuple(marine_envs.ENVIRONMENTS))
     _check_choice("algo", algo, tuple(ALGOS))
     import yaml  # here: only reading the settings needs PyYAML
@@ -69,6 +74,19 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     if not params:
         raise ValueError(f"{path} has no settings for algo {algo!r} (nor a default)")
     return params
+
+
+def _schedule(value: Any) -> Any:
+    """RL-Zoo's ``"lin_<x>"``: ``x`` decayed linearly to 0 over training (SB3 passes the
+    remaining fraction of training, 1 -> 0); any other value as it is."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        try:
+            start = float(value[4:])
+        except ValueError:
+            raise ValueError(f"schedule {value!r} is invalid: 'lin_' and a number, e.g. "
+                             "'lin_3e-4'") from None
+        return lambda remaining: remaining * start
+    return value
 
 
 # -- the vector environment adapter ---------------------------------------------------------
@@ -216,6 +234,56 @@ class FailurePenalty(VecEnvWrapper):
         return obs, rewards - self.penalty * np.asarray(failed, dtype=np.float32), dones, infos
 
 
+class KeepBest(BaseCallback):
+    """Keep the best agent of a run, not the last: every ``every`` calls (vector steps) and at
+    the end of training, score the agent on ``episodes`` validation episodes (seeds
+    :data:`VALIDATION_SEED`, ...) with :func:`agents.evaluation.evaluate`, and save it into
+    ``out/model.zip`` (and ``out/vecnormalize.pkl``) when it fails in fewer episodes than the
+    best so far, or as few at a lower mean cost.
+
+    PPO's last iterate is not its best: on the hydrofoil, a run whose every checkpoint from
+    480k steps on flew all validation episodes ended with an agent that broaches at the start.
+    """
+
+    def __init__(self, env_id: str, estimator: str, episodes: int, every: int, out: Path,
+                 max_episode_steps: int | None = None) -> None:
+        if not (isinstance(episodes, int) and episodes >= 1):
+            raise ValueError(f"validation_episodes={episodes!r} is invalid: an integer >= 1 "
+                             "(or 0 in the settings: no validation)")
+        super().__init__()
+        self.env_id, self.estimator, self.episodes = env_id, estimator, episodes
+        self.every, self.out, self.max_episode_steps = every, out, max_episode_steps
+        #: one entry per validation: timesteps, failed episodes, mean cost
+        self.history: list[dict[str, float]] = []
+        self.best: dict[str, float] | None = None
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.every == 0:
+            self._validate()
+        return True
+
+    def _on_training_end(self) -> None:
+        if not self.history or self.history[-1]["timesteps"] != self.num_timesteps:
+            self._validate()
+
+    def _validate(self) -> None:
+        normalizer = self.model.get_vec_normalize_env()  # its statistics as they are now
+        agent = Agent(self.model, normalizer, {})
+        seeds = range(VALIDATION_SEED, VALIDATION_SEED + self.episodes)
+        rows = evaluation.evaluate(self.env_id, lambda venv: agent, self.estimator, seeds,
+                                   max_episode_steps=self.max_episode_steps)
+        score = {"timesteps": self.num_timesteps,
+                 "failed": int(sum(row["failed"] for row in rows)),
+                 "cost": float(np.mean([row["cost"] for row in rows]))}
+        self.history.append(score)
+        if self.best is None or (score["failed"], score["cost"]) < (self.best["failed"],
+                                                                    self.best["cost"]):
+            self.best = score
+            self.model.save(self.out / "model.zip")
+            if normalizer is not None:
+                normalizer.save(str(self.out / "vecnormalize.pkl"))
+
+
 # -- building environments ------------------------------------------------------------------
 
 def estimator_choices() -> tuple[str | None, ...]:
@@ -267,12 +335,14 @@ def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: i
 @dataclasses.dataclass
 class TrainResult:
     """What :func:`train` did: output directory, environment steps taken, wall-clock time (s)
-    and throughput (environment steps per second, learning included)."""
+    and throughput (environment steps per second, learning and validation included); with
+    validation, the score of the agent kept in ``model.zip`` (timesteps, failed, cost)."""
 
     out: Path
     timesteps: int
     wall_seconds: float
     steps_per_second: float
+    selected: dict[str, float] | None = None
 
 
 def _importable(*modules: str) -> bool:
@@ -285,7 +355,9 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
           hyperparams: Mapping[str, Any] | None = None,
           max_episode_steps: int | None = None, torch_threads: int | None = 1) -> TrainResult:
     """Train ``algo`` on ``env_id`` and save ``model.zip``, ``vecnormalize.pkl`` (when the
-    settings normalise), ``config.json`` and ``checkpoints/`` into ``out``.
+    settings normalise), ``config.json`` and ``checkpoints/`` into ``out``. With the setting
+    ``validation_episodes`` (:class:`KeepBest`), ``model.zip`` is the best validated agent,
+    ``last_model.zip`` the last, and ``config.json`` has each validation's scores.
 
     :param timesteps: environment steps (default: the YAML's ``n_timesteps``).
     :param n_envs: parallel environments (default: the YAML's).
@@ -311,7 +383,15 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
     normalize_kwargs = dict(normalize) if isinstance(normalize, Mapping) else {}
     normalize = bool(normalize)
     penalty = float(params.pop("failure_penalty", 0.0))
+    for key in ("learning_rate", "clip_range"):
+        if key in params:
+            params[key] = _schedule(params[key])
+    # about five checkpoints (and validations) a run; every counts vector steps of n_envs boats
+    every = max(1, math.ceil(timesteps / 5 / n_envs))
+    validation_episodes = params.pop("validation_episodes", 0)
     out = Path(out)
+    keeper = KeepBest(env_id, estimator or RAW, validation_episodes, every, out,
+                      max_episode_steps) if validation_episodes else None
     out.mkdir(parents=True, exist_ok=True)
     venv = make_vec_env(env_id, n_envs, estimator, seed, backend, max_episode_steps)
     if penalty:
@@ -323,25 +403,30 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
     tensorboard = str(out / "tb") if _importable("tensorboard") else None
     model = ALGOS[algo](policy, venv, seed=seed, device="cpu", verbose=0,
                         tensorboard_log=tensorboard, **params)
-    # about five checkpoints a run; save_freq counts vector steps, n_envs env steps each
-    every = max(1, math.ceil(timesteps / 5 / n_envs))
-    checkpoints = CheckpointCallback(every, str(out / "checkpoints"), name_prefix="model",
-                                     save_vecnormalize=normalize)
+    callbacks: list[BaseCallback] = [CheckpointCallback(
+        every, str(out / "checkpoints"), name_prefix="model", save_vecnormalize=normalize)]
+    if keeper is not None:
+        callbacks.append(keeper)
     threads = torch.get_num_threads()
     torch.set_num_threads(torch_threads or threads)
     start = time.perf_counter()
     try:
-        model.learn(timesteps, callback=checkpoints,
+        model.learn(timesteps, callback=callbacks,
                     progress_bar=progress_bar and _importable("tqdm", "rich"))
     finally:
         torch.set_num_threads(threads)
     wall = time.perf_counter() - start
-    result = TrainResult(out, int(model.num_timesteps), wall, model.num_timesteps / wall)
-    model.save(out / "model.zip")
+    result = TrainResult(out, int(model.num_timesteps), wall, model.num_timesteps / wall,
+                         None if keeper is None else keeper.best)
+    last = "" if keeper is None else "last_"  # model.zip is then KeepBest's choice
+    model.save(out / f"{last}model.zip")
     if normalize:
-        venv.save(str(out / "vecnormalize.pkl"))
+        venv.save(str(out / f"{last}vecnormalize.pkl"))
     config.update(timesteps=result.timesteps, wall_seconds=wall,
                   steps_per_second=result.steps_per_second)
+    if keeper is not None:
+        config["validation"] = {"first_seed": VALIDATION_SEED, "episodes": validation_episodes,
+                                "selected": keeper.best, "history": keeper.history}
     (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
     venv.close()
     return result

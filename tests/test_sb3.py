@@ -10,7 +10,7 @@ import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 import marine_envs  # noqa: F401  (registers the environments)
-from agents.sb3 import SB3VecEnv, evaluate, load_agent, make_vec_env, train
+from agents.sb3 import VALIDATION_SEED, SB3VecEnv, evaluate, load_agent, make_vec_env, train
 from estimators import EstimatorWrapper, KalmanFilter, wrap
 
 USV = "marine_envs/USV-v0"
@@ -83,7 +83,7 @@ def test_train_load_evaluate(tmp_path):
     out = tmp_path / "run"
     result = train(USV, "ppo", estimator="kf", timesteps=1024, out=out, n_envs=2,
                    progress_bar=False, hyperparams={"n_steps": 256, "batch_size": 128,
-                                                    "n_epochs": 2})
+                                                    "n_epochs": 2, "learning_rate": "lin_1e-3"})
     assert result.timesteps >= 1024 and result.steps_per_second > 0
     assert (out / "model.zip").exists() and (out / "vecnormalize.pkl").exists()
     assert list((out / "checkpoints").glob("model_*_steps.zip"))
@@ -91,6 +91,7 @@ def test_train_load_evaluate(tmp_path):
     assert config["estimator"] == "kf" and config["n_envs"] == 2
     assert config["hyperparams"]["n_steps"] == 256
     agent = load_agent(out)
+    assert agent.model.lr_schedule(0.5) == pytest.approx(5e-4)  # "lin_1e-3" halfway through
     obs = np.zeros(agent.model.observation_space.shape, dtype=np.float32)
     action, _ = agent.predict(obs)
     assert action.shape == agent.model.action_space.shape
@@ -101,12 +102,29 @@ def test_train_load_evaluate(tmp_path):
     assert first == second
 
 
+def test_validation_keeps_the_best_agent_and_the_last(tmp_path):
+    out = tmp_path / "run"
+    train(USV, "ppo", estimator="kf", timesteps=2048, out=out, n_envs=2, progress_bar=False,
+          hyperparams={"n_steps": 256, "batch_size": 128, "n_epochs": 2,
+                       "validation_episodes": 2})
+    assert (out / "last_model.zip").exists() and (out / "last_vecnormalize.pkl").exists()
+    validation = json.loads((out / "config.json").read_text())["validation"]
+    history, best = validation["history"], validation["selected"]
+    assert [h["timesteps"] for h in history] == [410, 820, 1230, 1640, 2048]  # + the end
+    assert best == min(history, key=lambda h: (h["failed"], h["cost"]))
+    # model.zip is the selected agent: on the validation seeds it scores what it scored then
+    rows = evaluate(out, episodes=2, seed=VALIDATION_SEED)
+    assert np.mean([row["cost"] for row in rows]) == pytest.approx(best["cost"], rel=1e-9)
+
+
 @pytest.mark.parametrize(("kwargs", "message"), [
     ({"algo": "dqn"}, "ppo"),
     ({"estimator": "ukf"}, "akf"),
     ({"backend": "async"}, "dummy"),
     ({"timesteps": 0}, "timesteps"),
     ({"env_id": "marine_envs/Nope-v0"}, "USV-v0"),
+    ({"hyperparams": {"validation_episodes": -1}}, "validation_episodes"),
+    ({"hyperparams": {"learning_rate": "lin_fast"}}, "lin_3e-4"),
 ])
 def test_bad_input_is_refused(tmp_path, kwargs, message):
     args = {"env_id": USV, "out": tmp_path, "progress_bar": False, **kwargs}
