@@ -110,7 +110,7 @@ def test_validation_keeps_the_best_agent_and_the_last(tmp_path):
     assert (out / "last_model.zip").exists() and (out / "last_vecnormalize.pkl").exists()
     validation = json.loads((out / "config.json").read_text())["validation"]
     history, best = validation["history"], validation["selected"]
-    assert [h["timesteps"] for h in history] == [410, 820, 1230, 1640, 2048]  # + the end
+    assert [h["timesteps"] for h in history] == [410, 820, 1230, 1640, 2048]  # 4 + the end
     assert best == min(history, key=lambda h: (h["failed"], h["cost"]))
     # model.zip is the selected agent: on the validation seeds it scores what it scored then
     rows = evaluate(out, episodes=2, seed=VALIDATION_SEED)
