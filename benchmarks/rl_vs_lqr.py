@@ -85,8 +85,9 @@ def main() -> None:
                         help="score the agents already in --out instead of training them")
     parser.add_argument("--json", metavar="PATH", help="also write the rows as JSON")
     args = parser.parse_args()
-    if args.estimator not in sb3.estimator_choices():
-        parser.error(f"--estimator {args.estimator!r}: one of {sb3.estimator_choices()[1:]}")
+    named = [name for name in sb3.estimator_choices() if name is not None]
+    if args.estimator not in named:
+        parser.error(f"--estimator {args.estimator!r}: one of {named}")
     if args.episodes < 1:
         parser.error("--episodes must be >= 1")
     dirs = {name: args.out / f"{name}-{args.algo}-{args.estimator}-seed{args.seed}"
