@@ -10,7 +10,6 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 DESCRIPTION = """\
 marine-envs: Gymnasium environments for marine vehicles in waves, seen through noisy, quantized
@@ -152,19 +151,11 @@ def _envs(args: argparse.Namespace) -> int:
 
 
 def _diagnose(args: argparse.Namespace) -> int:
-    from estimators.discrepancy import diagnose
-    from marine_envs.models import get_model
-    from marine_envs.recording import read_recording
+    from estimators.diagnosis import diagnose
 
-    params = _read_params(args.params) if args.params else None
-    if args.model:
-        get_model(args.model)  # an unknown name fails here, naming the known ones
-    recording = read_recording(args.recording, model=args.model)
-    calibrate = [p.strip() for p in (args.calibrate or "").split(",") if p.strip()]
-    _check_calibrate(calibrate, get_model(args.model or recording.model))
-    print(f"marine diagnose: smoothing {len(recording.time)} samples of {args.recording} with "
-          "the nominal model and searching the catalogue (a few seconds)...", file=sys.stderr)
-    diagnosis = diagnose(recording, args.model, params=params, calibrate=calibrate)
+    diagnosis = diagnose(args.recording, args.model, params=args.params,
+                         calibrate=args.calibrate or (),
+                         log=lambda line: print(f"marine diagnose: {line}", file=sys.stderr))
     print(diagnosis.summary())
     if diagnosis.mismatch is False and diagnosis.reason:
         print(f"  reason: {diagnosis.reason}")
@@ -176,7 +167,7 @@ def _diagnose(args: argparse.Namespace) -> int:
         diagnosis.to_json(args.json)
         print(f"diagnosis written to {args.json}")
     if args.report:
-        from estimators.discrepancy.report import write_report
+        from estimators.diagnosis.report import write_report
 
         path = write_report(diagnosis, args.report, Path(args.recording).name)
         print(f"report written to {path}")
@@ -239,33 +230,6 @@ GRID_OPTIONS = ("vehicles", "estimators", "controllers", "seas", "sensors", "see
                 "timesteps")
 
 
-def _read_params(path: str) -> dict[str, float]:
-    """The ``--params`` file: a JSON object of parameter names to numbers."""
-    try:
-        value: Any = json.loads(Path(path).read_text())
-    except OSError as error:
-        raise ValueError(f"--params {path}: cannot read it: {error.strerror or error}") from None
-    except json.JSONDecodeError as error:
-        raise ValueError(f"--params {path}: not valid JSON: {error}") from None
-    if not isinstance(value, dict):
-        raise ValueError(f"--params {path}: must be a JSON object of parameter names to "
-                         f"numbers, e.g. {{\"wn\": 0.6}}; got {type(value).__name__}")
-    bad = {k: v for k, v in value.items()
-           if isinstance(v, bool) or not isinstance(v, int | float)}
-    if bad:
-        raise ValueError(f"--params {path}: parameter values must be numbers; got {bad}")
-    return {k: float(v) for k, v in value.items()}
-
-
-def _check_calibrate(names: Sequence[str], vehicle: Any) -> None:
-    """:raises ValueError: a ``--calibrate`` name that is not a parameter of ``vehicle``."""
-    known = [f.name for f in dataclasses.fields(vehicle.params)]
-    unknown = [n for n in names if n not in known]
-    if unknown:
-        raise ValueError(f"--calibrate: unknown parameter(s) {unknown} for model "
-                         f"{vehicle.name!r}; known: {', '.join(known)}")
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="marine", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -308,6 +272,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
     sim.set_defaults(run=_simulate)
 
+    from estimators import registry
+
     from .episode import EPISODE_ESTIMATORS, EPISODE_POLICIES
 
     episode = commands.add_parser(
@@ -320,11 +286,9 @@ def build_parser() -> argparse.ArgumentParser:
                          help="lqr-state (LQR on the true state, the default), lqr (on the raw "
                               "sensors), or an excitation: zero, sine, random, prbs")
     episode.add_argument("--estimator", choices=EPISODE_ESTIMATORS,
-                         help="put an estimator between the sensors and the policy: kf (a "
-                              "Kalman filter of the env's linearised model), akf (seed 001's "
-                              "adaptive one), ekf (an extended Kalman filter of its nonlinear "
-                              "model) or pd (seed 000's PD observer, USV only); --policy lqr "
-                              "then acts on the full estimated state")
+                         help="put an estimator between the sensors and the policy: "
+                              f"{registry.describe()}; --policy lqr then acts on the full "
+                              "estimated state")
     episode.add_argument("--seconds", type=float, help="episode length, s (the env's own)")
     episode.add_argument("--seed", type=int, default=0, help="episode seed (0)")
     episode.add_argument("--plot", metavar="PNG", help="write a figure of the episode")
@@ -340,16 +304,22 @@ def build_parser() -> argparse.ArgumentParser:
         description="Re-run an experiment of the source documents: the document's own settings "
                     "and a corrected setting where the document's are degenerate (the output "
                     "says which is which and why), averaged over seeds with their spread.\n\n"
-                    "  usv-quantized-observer  seed 000: PD observer vs Luenberger on quantized "
-                    "USV data\n"
-                    "  hydrofoil-akf           seed 001: LQR fed by a KF vs the adaptive KF, "
-                    "time-varying sea\n"
-                    "  rov-online-id           seed 002: joint EKF of velocity and 18 drag "
-                    "coefficients through the morph, thrust feed-forward\n"
-                    "  dp-wave-frequency       seed 003: FFT + Butterworth + EKF estimate of the "
-                    "wave frequencies, wave filter update\n"
-                    "  hovercraft-zigzag       seed 004: staged EKF identification from 5/5, "
-                    "15/15, 25/25 zig-zags vs least squares",
+                    "  usv-quantized-observer  the USV observer patent: PD observer vs "
+                    "Luenberger on quantized\n"
+                    "                          USV data\n"
+                    "  hydrofoil-akf           the hydrofoil AKF paper: LQR fed by a KF vs the "
+                    "adaptive KF,\n"
+                    "                          time-varying sea\n"
+                    "  rov-online-id           the morphing-robot patent: joint EKF of velocity "
+                    "and 18 drag\n"
+                    "                          coefficients through the morph, thrust "
+                    "feed-forward\n"
+                    "  dp-wave-frequency       the DP wave-frequency patent: FFT + Butterworth + "
+                    "EKF estimate of\n"
+                    "                          the wave frequencies, wave filter update\n"
+                    "  hovercraft-zigzag       the hovercraft EKF paper: staged EKF identification "
+                    "from 5/5, 15/15,\n"
+                    "                          25/25 zig-zags vs least squares",
         formatter_class=argparse.RawDescriptionHelpFormatter)
     reproduce.add_argument("name", choices=REPRODUCTIONS, help="the experiment")
     reproduce.add_argument("--quick", action="store_true",
@@ -367,7 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose.add_argument("--model", help="model name (default: the recording's metadata)")
     diagnose.add_argument("--params", metavar="FILE",
                           help='JSON object of nominal parameter overrides (names as in '
-                               'MODELS.md, SI units), e.g. {"wn": 0.6}; applied on top of the '
+                               'docs/models.md, SI units), e.g. {"wn": 0.6}; applied on top of the '
                                "recording's metadata")
     diagnose.add_argument("--calibrate", metavar="P1,P2,...",
                           help="nominal parameters to fit first (comma-separated), so that "
@@ -388,9 +358,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "last.")
     train.add_argument("env_id", help="environment id, e.g. marine_envs/USV-v0")
     train.add_argument("--algo", default="ppo", help="ppo, sac, td3 or a2c (default ppo)")
-    train.add_argument("--estimator",
+    train.add_argument("--estimator", choices=registry.names(), metavar="ESTIMATOR",
                        help="what the agent sees: raw (the sensors, the default), true (the "
-                            "true state) or an estimator: kf, akf, ekf, pd (USV only)")
+                            f"true state) or an estimator: {registry.describe()}")
     train.add_argument("--timesteps", type=int,
                        help="environment steps (default: the YAML's n_timesteps)")
     train.add_argument("--n-envs", type=int, help="boats stepped together (default: the YAML's)")
@@ -423,8 +393,8 @@ def build_parser() -> argparse.ArgumentParser:
     axes.add_argument("--vehicles", nargs="+", type=str,
                       help="usv hydrofoil rov dp hovercraft (default: all)")
     axes.add_argument("--estimators", nargs="+",
-                      help="true raw kf akf ekf pd, or one registered with "
-                           "agents.evaluation.register_estimator (default: true raw kf akf ekf)")
+                      help=f"{' '.join(registry.names())}, or one registered with "
+                           "estimators.registry.register (default: true raw kf akf ekf)")
     axes.add_argument("--controllers", nargs="+",
                       help="lqr, nominal, ppo/sac/td3/a2c (trained here per vehicle and "
                            "estimator) or sb3:DIR (a 'marine train' output) (default: lqr)")

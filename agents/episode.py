@@ -11,14 +11,15 @@ import gymnasium as gym
 import numpy as np
 
 import marine_envs  # noqa: F401  (registers the environments)
+from estimators import registry
 
-from .evaluation import ESTIMATORS, Episode, episode_metrics, run_episode
+from .evaluation import Episode, episode_metrics, run_episode
 from .lqr import LQRPolicy
 from .simulate import POLICIES, make_policy
 
 EPISODE_POLICIES = (*POLICIES, "lqr-state")
 #: Estimators ``marine episode --estimator`` can put between the sensors and the policy.
-EPISODE_ESTIMATORS = tuple(ESTIMATORS)
+EPISODE_ESTIMATORS = tuple(registry.ESTIMATORS)
 
 
 class OnTrueState:
@@ -46,10 +47,12 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     """One episode of ``env_id`` under ``policy``; optionally a figure of it.
 
     :param seconds: episode length, s (default: the environment's own episode).
-    :param estimator: a registered estimator (:data:`agents.evaluation.ESTIMATORS`: ``"kf"``,
-        a Kalman filter of the env's model linearised at the reference; ``"akf"``, seed 001's
-        adaptive one; ``"ekf"``, an extended Kalman filter of the nonlinear model; ``"pd"``, seed
-        000's PD observer, USV only) turns the sensor output into the policy's observation.
+    :param estimator: a registered estimator (:data:`estimators.registry.ESTIMATORS`:
+        ``"kf"``, a Kalman filter of the env's model linearised at the reference; ``"akf"``, the
+        hydrofoil AKF paper's adaptive one; ``"ekf"``, an extended Kalman filter of the
+        nonlinear model; ``"pd"``, the USV observer patent's PD observer, USV only; ``"wave"``
+        and ``"wave_adaptive"``, the DP vessel's wave filter) turns the sensor output into the
+        policy's observation.
     :return: summary: return, cost, failed, RMS error of each weighted state and input (SI;
         angles in degrees), and with an estimator the RMS estimation error of every state.
     """
@@ -64,7 +67,7 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     if estimator is not None:
         from estimators import EstimatorWrapper
 
-        env = EstimatorWrapper(env, ESTIMATORS[estimator](env))
+        env = EstimatorWrapper(env, registry.make(estimator, env))
     episode = run_episode(env, episode_policy(policy, env, seed), steps, seed=seed)
     if plot is not None:
         title = f"{env_id}, policy {policy}" + (f" on {estimator}" if estimator else "")

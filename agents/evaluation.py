@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 import marine_envs  # noqa: F401  (registers the environments)
+from estimators.registry import ORACLE, RAW, observe
 
 FloatArray = NDArray[np.float64]
 
@@ -184,79 +185,6 @@ def episode_metrics(sim: Any, states: FloatArray, inputs: FloatArray, clipped: N
     return out
 
 
-# -- estimators by name ------------------------------------------------------------------------
-
-#: ``name -> factory(vector env) -> estimator``; a factory raises ValueError where it does not
-#: apply (e.g. seed 000's observer off the USV).
-ESTIMATORS: dict[str, Callable[[Any], Any]] = {}
-#: Observations that are not an estimator's: the true state (oracle) and the raw sensors.
-ORACLE, RAW = "true", "raw"
-
-
-def register_estimator(name: str, factory: Callable[[Any], Any]) -> None:
-    """Make ``name`` an estimator of :func:`observe` (and so of ``marine bench``).
-
-    :param factory: ``env -> estimator`` (:class:`estimators.base.Estimator`), given the
-        native vector env; raise ValueError if it does not apply to that vehicle.
-    """
-    if name in (ORACLE, RAW) or not name.isidentifier():
-        raise ValueError(f"estimator name {name!r} is invalid: an identifier, not "
-                         f"{ORACLE!r} or {RAW!r}")
-    ESTIMATORS[name] = factory
-
-
-def _kf(env: Any) -> Any:
-    from estimators import KalmanFilter
-
-    return KalmanFilter.for_env(env)
-
-
-def _akf(env: Any) -> Any:
-    """Seed 001's adaptive filter: process noise switched between the sea's own (``Q_min``)
-    and ten times it (seed 001's WQmax / WQmin)."""
-    from estimators import AdaptiveKalmanFilter
-    from estimators.kalman import default_process_noise
-
-    Q = default_process_noise(env.unwrapped.sim)
-    return AdaptiveKalmanFilter.for_env(env, Q=Q, Q_max=10 * Q)
-
-
-def _ekf(env: Any) -> Any:
-    from estimators import ExtendedKalmanFilter
-
-    return ExtendedKalmanFilter.for_env(env)
-
-
-def _pd_observer(env: Any) -> Any:
-    """Seed 000's quantized-signal PD observer (LMI design; the USV only)."""
-    from estimators import QuantizedPDObserver
-    from marine_envs.models import USVModel
-
-    sim = env.unwrapped.sim
-    if not isinstance(sim.model, USVModel):
-        raise ValueError(f"seed 000's PD observer is designed for the USV, not {sim.model.name}")
-    return QuantizedPDObserver.for_usv(sim.model, mu2=0.01, dt=sim.dt)
-
-
-for _name, _factory in (("kf", _kf), ("akf", _akf), ("ekf", _ekf), ("pd", _pd_observer)):
-    register_estimator(_name, _factory)
-
-
-def observe(venv: Any, estimator: str) -> Any:
-    """``venv`` as the controller sees it through ``estimator``: ``"true"`` (the true state),
-    ``"raw"`` (the sensors themselves) or a registered estimator's estimate."""
-    from estimators import TrueStateWrapper, wrap
-
-    if estimator == ORACLE:
-        return TrueStateWrapper(venv)
-    if estimator == RAW:
-        return venv
-    if estimator not in ESTIMATORS:
-        raise ValueError(f"estimator={estimator!r} is unknown: one of "
-                         f"{(ORACLE, RAW, *ESTIMATORS)}")
-    return wrap(venv, ESTIMATORS[estimator](venv))
-
-
 # -- policies by name --------------------------------------------------------------------------
 
 class NominalInput:
@@ -272,7 +200,8 @@ class NominalInput:
 
 
 def lqr_for(venv: Any, estimator: str) -> Any:
-    """The task's discrete LQR acting on what ``estimator`` gives (see :func:`observe`)."""
+    """The task's discrete LQR acting on what ``estimator`` gives (a name of
+    :func:`estimators.registry.observe`)."""
     from .lqr import LQRPolicy
 
     return LQRPolicy.for_env(venv, observed="state" if estimator == ORACLE else "auto")
@@ -306,7 +235,7 @@ def evaluate(env_id: str, policy: str | Callable[[Any], Any], estimator: str = R
 
     :param policy: ``"lqr"``, ``"nominal"``, or ``venv -> policy`` (e.g. an SB3 agent's
         factory); the policy must take a batch of observations.
-    :param estimator: see :func:`observe`.
+    :param estimator: a name of :func:`estimators.registry.observe`.
     :param seeds: the episodes' seeds (consecutive: one batch), or a count from 0.
     :return: one :func:`episode_metrics` dict per seed, with its ``seed``.
     """

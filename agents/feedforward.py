@@ -1,6 +1,6 @@
-"""Model-based thrust feed-forward plus LQR feedback for the morphing ROV (seed 002).
+"""Model-based thrust feed-forward plus LQR feedback for the ROV of the morphing-robot patent.
 
-Seed 002 ends with "the identified coefficients feed thrust feed-forward for motion control": from
+The patent ends with "the identified coefficients feed thrust feed-forward for motion control": from
 the reference motion and the hydrodynamic coefficients, predict the drag and moments the robot
 will meet and command the thrust that cancels them, so that the feedback only corrects what the
 model does not predict. Here::
@@ -13,7 +13,7 @@ reference exactly (inverse dynamics); ``M(s)``, ``C_RB`` and the restoring force
 shape ``s`` (the robot commands its own morph), only the viscous coefficients ``theta`` differ
 between an identified and a nominal feed-forward. ``K`` is the discrete LQR of the model
 linearised at cruise (1.5 m/s, cruise shape), on the velocities, depth and attitude; the roll
-moment is not commanded (the thrusters have no roll authority, MODELS.md 3.5).
+moment is not commanded (the thrusters have no roll authority, docs/models.md 3.5).
 """
 
 from __future__ import annotations

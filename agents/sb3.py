@@ -36,9 +36,10 @@ from stable_baselines3.common.vec_env import (
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
 import marine_envs
+from estimators import registry
+from estimators.registry import ORACLE, RAW
 
 from . import evaluation
-from .evaluation import ORACLE, RAW
 
 ALGOS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C}
 BACKENDS = ("native", "dummy")
@@ -288,8 +289,8 @@ class KeepBest(BaseCallback):
 
 def estimator_choices() -> tuple[str | None, ...]:
     """What an agent may see: None (= ``"raw"``, the sensors), ``"true"`` (the true state) or
-    a registered estimator (:data:`agents.evaluation.ESTIMATORS`)."""
-    return (None, ORACLE, RAW, *evaluation.ESTIMATORS)
+    a registered estimator (:data:`estimators.registry.ESTIMATORS`)."""
+    return (None, *registry.names())
 
 
 def _single_env(env_id: str, estimator: str | None, max_episode_steps: int | None) -> gym.Env:
@@ -300,7 +301,7 @@ def _single_env(env_id: str, estimator: str | None, max_episode_steps: int | Non
         return env
     if estimator == ORACLE:
         raise ValueError("the dummy backend has no true-state observation; use backend='native'")
-    return EstimatorWrapper(env, evaluation.ESTIMATORS[estimator](env))
+    return EstimatorWrapper(env, registry.make(estimator, env))
 
 
 def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: int = 0,

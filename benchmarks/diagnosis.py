@@ -1,7 +1,7 @@
 """Mismatch diagnosis on its seeded acceptance set, against plain SINDy on the residuals, and
 the time one diagnosis takes on one core.
 
-1. Accuracy. :func:`marine_envs.diagnosis_cases.catalogue_cases`: for the USV and the hovercraft,
+1. Accuracy. :func:`estimators.diagnosis.cases.catalogue_cases`: for the USV and the hovercraft,
    every one of the 15 catalogue effects (sized by ``typical_effect`` at strength 0.3), two
    two-effect combinations per vehicle and six effect-free records (one with ``--quick``; a
    rate of 95 % needs more than the test suite's twelve), at sensor noise 5 % and 10 % of each
@@ -27,7 +27,7 @@ the time one diagnosis takes on one core.
    divided by their root-mean-square (not centred, so a monomial keeps its meaning) and each
    residual by the spread of its state's derivative. The answer is the term with the largest
    ``|coefficient| x RMS(term)`` (RMS, not std: a constant term has none) over all equations,
-   named by :func:`~marine_envs.diagnosis_cases.sindy_term_to_effect`; for a pair, the two best
+   named by :func:`~estimators.diagnosis.cases.sindy_term_to_effect`; for a pair, the two best
    distinct answers. Threshold 0.1: a sweep over 0.01-0.5 (both vehicles, seed 0, 5 %, 10 % and
    20 % noise, single effects; ``--sindy-thresholds``) ranked no case right at any threshold, so
    the middle value is kept. Without any effect and without noise the residual is already 1.4-13
@@ -40,7 +40,7 @@ the time one diagnosis takes on one core.
 3. Timing: a 10-minute record at 10 Hz of the USV with quadratic damping on r at 10 % noise,
    diagnosed in this process pinned to one CPU with one BLAS thread (target: 30 s); as a
    same-run reference, one call of the nominal EKF + RTS smoother that starts every diagnosis
-   (``estimators.discrepancy.residuals.estimate``) on the same record, and the ratio.
+   (``estimators.diagnosis.residuals.estimate``) on the same record, and the ratio.
 
 Exit code 1 when an acceptance rate or the time target is missed. Run time on 2 cores: about
 5 min with ``--quick --vehicles usv`` (32 cases), 14 min with ``--seeds 0`` (92 cases, 9-27 s
@@ -76,7 +76,7 @@ from _common import pin_to_one_cpu  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 from tqdm import tqdm  # noqa: E402
 
-from marine_envs.diagnosis_cases import (  # noqa: E402
+from estimators.diagnosis.cases import (  # noqa: E402
     ACCEPTANCE_VEHICLES,
     Case,
     Outcome,
@@ -87,9 +87,9 @@ from marine_envs.diagnosis_cases import (  # noqa: E402
     summarize,
     term_factors,
 )
+from estimators.diagnosis.synthetic import synthesize, typical_effect  # noqa: E402
 from marine_envs.models import VehicleModel, get_model  # noqa: E402
 from marine_envs.recording import Recording  # noqa: E402
-from marine_envs.synthetic import synthesize, typical_effect  # noqa: E402
 
 FloatArray = NDArray[np.float64]
 #: STLSQ threshold of the SINDy baseline (on the scaled problem, see the module docstring).
@@ -221,8 +221,8 @@ def run_cases(cases: Sequence[Case], thresholds: Sequence[float],
 def timing(seed: int = 0) -> dict[str, Any]:
     """Seconds of one diagnosis of the 10-minute USV record and of one nominal smoother call,
     in this process pinned to one CPU."""
-    from estimators.discrepancy import diagnose
-    from estimators.discrepancy.residuals import estimate
+    from estimators.diagnosis import diagnose
+    from estimators.diagnosis.residuals import estimate
 
     pinned = pin_to_one_cpu()
     effect = typical_effect("usv", "quadratic_damping", "r", seed=seed, duration=TIMING_DURATION)

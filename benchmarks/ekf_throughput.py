@@ -1,5 +1,5 @@
-"""Joint state/parameter EKF throughput: the ROV's 13 states plus seed 002's 18 drag
-coefficients, a batch of filters against the same filters run one by one, on one core.
+"""Joint state/parameter EKF throughput: the ROV's 13 states plus the morphing-robot patent's 18
+drag coefficients, a batch of filters against the same filters run one by one, on one core.
 
 Measured: env-updates per second, i.e. ``predict`` + ``update`` pairs times the number of
 filters over the wall time, of :class:`~estimators.ekf.ExtendedKalmanFilter` on the ROV model

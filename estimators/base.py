@@ -1,4 +1,4 @@
-"""The estimator contract (ARCHITECTURE.md contract 3), shared by every filter and observer.
+"""The estimator contract (docs/architecture.md contract 3), shared by every filter and observer.
 
 An estimator holds a batch of ``N`` independent filters (leading axis), so one object serves a
 vector environment. A step is ``predict(u)`` with the input applied over the last control period,

@@ -9,8 +9,9 @@ Model (continuous dynamics, discrete measurements; filterpy's names)::
 The filter estimates the augmented state ``z = [x; theta]``. ``predict`` integrates the mean with
 RK4 over the period (input held) and propagates the covariance with the transition matrix of the
 Jacobian at the prior mean, ``Phi = exp(A dt)`` (Taylor series with scaling and squaring). The
-update is in Joseph form and symmetrised. Seeds 002, 003 and 004 all identify parameters this way:
-hydrodynamic coefficients, wave frequencies and manoeuvring derivatives.
+update is in Joseph form and symmetrised. The morphing-robot patent, the DP wave-frequency patent
+and the hovercraft EKF paper all identify parameters this way: hydrodynamic coefficients, wave
+frequencies and manoeuvring derivatives.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from marine_envs.models import VehicleModel
+from marine_envs.models.integrate import rk4
 
 from .base import Estimator, as_batch, check_covariance, check_measurement
 from .kalman import _wrap, _wrapped_channels, default_measurement_noise, default_process_noise
@@ -399,14 +401,7 @@ class ExtendedKalmanFilter(Estimator):
 
     def _propagate(self, z: FloatArray, u: FloatArray, dt: float) -> FloatArray:
         """Augmented states ``z`` ``(R, n + p)`` after ``dt`` s of RK4 with inputs ``u`` held."""
-        h = dt / self.substeps
-        for _ in range(self.substeps):
-            k1 = self._z_dot(z, u)
-            k2 = self._z_dot(z + 0.5 * h * k1, u)
-            k3 = self._z_dot(z + 0.5 * h * k2, u)
-            k4 = self._z_dot(z + h * k3, u)
-            z = z + (h / 6) * (k1 + 2 * (k2 + k3) + k4)
-        return z
+        return rk4(lambda z, _t: self._z_dot(z, u), z, dt / self.substeps, self.substeps)
 
     def _add_process_noise(self, P: FloatArray, dt: float) -> FloatArray:
         """``P`` plus the model states' and the parameters' process noise over ``dt``,
@@ -503,72 +498,6 @@ class ExtendedKalmanFilter(Estimator):
                 self.diverged = self.diverged | bad
 
 
-class UnscentedKalmanFilter(ExtendedKalmanFilter):
-    """The unscented variant: no Jacobians; the mean and covariance are carried through the
-    nonlinear dynamics and measurement by ``2 L`` sigma points ``x +- sqrt(L) columns of
-    chol(P)`` with equal weights (the spherical cubature rule: no negative weight, so the
-    covariance stays positive definite for any state size ``L = n + p``).
-
-    Same arguments, attributes and offline methods as :class:`ExtendedKalmanFilter` (``jacobian``
-    and ``parameter_jacobian`` are not used). Its ``transition`` is the statistical
-    linearisation ``Phi = C' P^-1`` (``C`` the cross covariance of the sigma points before and
-    after the step), with which :func:`rts_smooth` is the unscented RTS smoother. Each step costs
-    ``2 L`` evaluations of ``f`` per RK4 stage.
-    """
-
-    def predict(self, u: ArrayLike, dt: float | None = None) -> FloatArray:
-        u, dt = self._input(u, dt)
-        X = _sigma_points(self.x, self.P)  # (N, 2L, L)
-        N, M, L = X.shape
-        Y = self._propagate(X.reshape(N * M, L), np.repeat(u, M, axis=0), dt).reshape(N, M, L)
-        x = Y.mean(axis=1)
-        dX, dY = X - self.x[:, None], Y - x[:, None]
-        cross = dX.transpose(0, 2, 1) @ dY / M
-        try:
-            self._transition = np.linalg.solve(self.P, cross).transpose(0, 2, 1)
-        except np.linalg.LinAlgError:  # a state known exactly (zero variance)
-            self._transition = (np.linalg.pinv(self.P, hermitian=True) @ cross).transpose(0, 2, 1)
-        self.x = x
-        self.P = self._add_process_noise(dY.transpose(0, 2, 1) @ dY / M, dt)
-        return self.x
-
-    def update(self, y: ArrayLike, mask: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
-        y, valid = check_measurement(y, mask, self.measurement_names, self.batch_size)
-        X = _sigma_points(self.x, self.P)
-        N, M, L = X.shape
-        rows = X.reshape(N * M, L)[:, :self._n]
-        Y = (rows @ self._H[:, :self._n].T if self._H is not None else self.h(rows))
-        Y = Y.reshape(N, M, -1)
-        y_hat = Y.mean(axis=1)
-        dY = Y - y_hat[:, None]
-        if self.angular.size:  # spreads of a wrapped channel about its mean, not across +-pi
-            dY[:, :, self.angular] = _wrap(dY[:, :, self.angular])
-        dY = dY * valid[:, None, :]  # missing channels: no correlation, unit noise: zero gain
-        dX = X - self.x[:, None]
-        S = dY.transpose(0, 2, 1) @ dY / M + self._masked_noise(valid)
-        cross = dX.transpose(0, 2, 1) @ dY / M
-        e = self._innovation(y, y_hat, valid)
-        K, S_inv_e = self._gain(cross, S, e)
-        self.x = self.x + (K @ e[:, :, None])[:, :, 0]
-        P = self.P - K @ S @ K.transpose(0, 2, 1)
-        self.P = (P + P.transpose(0, 2, 1)) * 0.5
-        self._record_update(e, S, S_inv_e, valid)
-        return self.x, self.P
-
-
-def _sigma_points(x: FloatArray, P: FloatArray) -> FloatArray:
-    """``x +- sqrt(L) S`` columns, ``S S' = P`` (Cholesky; an eigen-decomposition with negative
-    eigenvalues clipped if P lost definiteness): ``(N, 2 L, L)``."""
-    L = x.shape[1]
-    try:
-        root = np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        w, V = np.linalg.eigh(P)
-        root = V * np.sqrt(np.maximum(w, 0.0))[:, None, :]
-    spread = math.sqrt(L) * root.transpose(0, 2, 1)  # rows: the columns of the root
-    return np.concatenate([x[:, None] + spread, x[:, None] - spread], axis=1)
-
-
 def rts_smooth(result: FilterResult) -> SmootherResult:
     """Rauch-Tung-Striebel smoothing of a forward run: ``C_k = P_k Phi_k' P_pred_{k+1}^-1``,
     ``x_s,k = x_k + C_k (x_s,k+1 - x_pred,k+1)``, ``P_s,k = P_k + C_k (P_s,k+1 - P_pred,k+1) C_k'``.
@@ -611,4 +540,4 @@ def _transition_rows(A: FloatArray) -> FloatArray:
 
 
 __all__ = ["Dynamics", "ExtendedKalmanFilter", "FilterResult", "Jacobian", "SmootherResult",
-           "UnscentedKalmanFilter", "rts_smooth"]
+           "rts_smooth"]

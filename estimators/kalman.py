@@ -1,6 +1,6 @@
-"""Batched discrete-time Kalman filters: the textbook filter and seed 001's adaptive one.
+"""Batched discrete-time Kalman filters: the textbook one and the hydrofoil AKF paper's AKF.
 
-Model (filterpy's names, seed 001's symbols in brackets)::
+Model (filterpy's names, the paper's symbols in brackets)::
 
     x_{k+1} = F x_k + G u_k + c + w_k,    w_k ~ N(0, Q)    [Phi, G, WQ]
     y_k     = H x_k + d + v_k,            v_k ~ N(0, R)    [H, WR]
@@ -18,11 +18,11 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
 from marine_envs.models import VehicleModel, zoh
+from marine_envs.models.linear import dlqe
 from marine_envs.sensors import GaussianNoise, Quantizer, WrapAngle
 
 from .base import Estimator, as_batch, check_covariance, check_measurement
@@ -306,24 +306,21 @@ class KalmanFilter(Estimator):
 
     def steady_state_covariance(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The stationary ``(P_predicted, P_updated)`` of the filter with every channel measured,
-        from the discrete algebraic Riccati equation."""
-        F, H = self.F.astype(float), self.H.astype(float)
-        P_pred = scipy.linalg.solve_discrete_are(F.T, H.T, self.Q, self.R)
-        S = H @ P_pred @ H.T + self.R
-        P_upd = P_pred - P_pred @ H.T @ np.linalg.solve(S, H @ P_pred)
-        return P_pred, (P_upd + P_upd.T) / 2
+        from the discrete algebraic Riccati equation (:func:`marine_envs.models.linear.dlqe`)."""
+        return dlqe(self.F.astype(float), self.H.astype(float), self.Q, self.R)
 
 
 class AdaptiveKalmanFilter(KalmanFilter):
-    """Seed 001's adaptive Kalman filter: the process noise switches with the innovation test.
+    """The hydrofoil AKF paper's adaptive Kalman filter: the process noise switches with the
+    innovation test.
 
     After each update the statistic ``phi = e' Ce^-1 e`` (``Ce = H P_pred H' + WR``), chi-square
     with ``m`` degrees of freedom when the filter's model is right, picks the process noise of the
     next prediction: ``Q_max`` above the ``upper_quantile`` (0.90) of chi2(m), ``Q_min`` below the
     ``lower_quantile`` (0.50), else unchanged. It starts at ``Q_min``.
 
-    :param Q, Q_max: the two process-noise covariances ``Q_min`` and ``Q_max`` (seed 001:
-        WQmin = diag(1, 1, 0.3, 0.3), WQmax = diag(10, 10, 3, 3)).
+    :param Q, Q_max: the two process-noise covariances ``Q_min`` and ``Q_max`` (the hydrofoil AKF
+        paper: WQmin = diag(1, 1, 0.3, 0.3), WQmax = diag(10, 10, 3, 3)).
     :param upper_quantile, lower_quantile: the thresholds' chi-square probabilities.
     Other parameters as :class:`KalmanFilter`.
 

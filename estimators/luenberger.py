@@ -1,5 +1,5 @@
 """Linear observers on quantized network data: the shared held-input machinery and the classical
-Luenberger observer used as the baseline of seed 000 (MODELS.md 1.4-1.6).
+Luenberger observer used as the baseline of the USV observer patent (docs/models.md 1.4-1.6).
 
 Both observers of this package's quantized-signal study are linear ODEs driven by data that stay
 constant between two samples: the input ``u`` (held by the actuator) and what last arrived over
@@ -8,10 +8,10 @@ matrix exponential per step size, cached): the result does not depend on the ste
 explicit Euler would only approximate, and costs the same two matrix products per step.
 
 The classical network sends every measured channel through the static uniform quantizer
-``q(y) = mu2 * round(y / mu2)`` (one step ``mu2`` for all channels, as seed 000's quantizer 2), and
-the Luenberger observer ``x_hat' = A x_hat + B u + L (q(y) - C x_hat)`` uses that. Its gain comes
-from pole placement (:func:`observer_gain`); any other gain (a steady-state Kalman gain, say) can be
-passed directly.
+``q(y) = mu2 * round(y / mu2)`` (one step ``mu2`` for all channels, as the USV observer patent's
+quantizer 2), and the Luenberger observer ``x_hat' = A x_hat + B u + L (q(y) - C x_hat)`` uses
+that. Its gain comes from pole placement (:func:`observer_gain`); any other gain (a steady-state
+Kalman gain, say) can be passed directly.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from .base import Estimator, FloatArray, as_batch
 #: Default observer poles of the USV Luenberger baseline, 1/s. [PROPOSED] Real, distinct and as
 #: slow as the PD observer's slow modes (|Re| 0.1-0.15), so both settle alike: faster poles
 #: amplify the unknown wave disturbance in the sway estimate (poles -0.3..-0.7 gave a 3.6 times
-#: larger wave-induced floor in the corrected seed-000 setting).
+#: larger wave-induced floor in the corrected setting of the USV observer patent's example).
 USV_OBSERVER_POLES: tuple[float, ...] = (-0.15, -0.2, -0.25, -0.3, -0.35)
 
 #: An estimate larger than this (in any state's SI unit) counts as diverged.
@@ -198,8 +198,8 @@ class LuenbergerObserver(HeldInputObserver):
     """Classical Luenberger observer fed the classical network's data: every output quantized.
 
     ``x_hat' = A x_hat + B u + L (q(y) - C x_hat)`` with ``q(y) = mu2 * round(y / mu2)`` on every
-    channel (seed 000's static quantizer 2 applied to the whole output, as a network without the
-    seed's error-transmission scheme would do). ``q(y)`` is held between samples.
+    channel (the USV observer patent's static quantizer 2 applied to the whole output, as a network
+    without the patent's error-transmission scheme would do). ``q(y)`` is held between samples.
 
     :param A: ``(n, n)`` state matrix, 1/s.
     :param B: ``(n, n_u)`` input matrix.
@@ -232,8 +232,8 @@ class LuenbergerObserver(HeldInputObserver):
     def for_usv(cls, model: USVModel | None = None, *,
                 poles: Sequence[float] = USV_OBSERVER_POLES, mu2: float | ArrayLike = 0.5,
                 dt: float = 1e-3) -> LuenbergerObserver:
-        """The USV baseline: model matrices of ``model`` (default seed 000), the seed's measured
-        channels ``[r, psi, p, phi]``, gain placed at ``poles`` (1/s).
+        """The USV baseline: model matrices of ``model`` (default: the USV observer patent's), the
+        patent's measured channels ``[r, psi, p, phi]``, gain placed at ``poles`` (1/s).
 
         :param mu2: quantization step, rad and rad/s.
         :param dt: nominal step, s.

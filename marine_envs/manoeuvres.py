@@ -15,18 +15,18 @@ Definitions used for the zig-zag metrics (times from the first execute, t = 0):
 * initial turning time: time of the second execute (heading change first reaches +B);
 * first (second) overshoot angle: how far the heading change goes past +B (-B) after the second
   (third) execute, i.e. ``max(psi - psi_0) - B`` (``-min(psi - psi_0) - B``);
-* first peak heading ("maximum heading" in MODELS.md): ``B + first overshoot``, reached at the
-  first peak time; time to check yaw = first peak time - initial turning time;
+* first peak heading ("maximum heading" in docs/models.md 5.3): ``B + first overshoot``, reached
+  at the first peak time; time to check yaw = first peak time - initial turning time;
 * period: time of one full cycle, from the second to the fourth execute.
 
 Turning circle: the rudder is held at ``delta`` from steady straight running. Steady values are
 those at the end of the run: yaw rate r, drift angle ``beta = atan2(-v, u)`` (positive when the
-velocity points out of a starboard turn, MODELS.md's beta), speed ``U = hypot(u, v)`` and radius
-``R = U/|r|``. Advance and transfer are read at a heading change of 90 deg, the tactical diameter
-at 180 deg (transfer normal to the approach course).
+velocity points out of a starboard turn, the beta of docs/models.md 5.2), speed
+``U = hypot(u, v)`` and radius ``R = U/|r|``. Advance and transfer are read at a heading change
+of 90 deg, the tactical diameter at 180 deg (transfer normal to the approach course).
 
 Both are integrated by classical RK4 with the inputs held over each step (the rudder command is
-updated at the start of a step), as in MODELS.md's checks (dt = 0.05 s).
+updated at the start of a step), as in the checks of docs/models.md 5.3 (dt = 0.05 s).
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .models.base import FloatArray, VehicleModel
+from .models.integrate import rk4
 
 #: Input names recognised as the rudder, state names recognised as the heading, in order.
 RUDDER_NAMES = ("delta", "delta_r", "rudder")
@@ -77,7 +78,7 @@ class ZigzagRudder:
     :param batch_size: number of boats.
     :param first_direction: +1 (default, starboard first as ITTC) or -1 (port first).
     :param turn_sign: +1 (default) when a positive rudder turns the heading positive (SNAME
-        convention, e.g. the hovercraft), -1 for models with the opposite sign (the USV seed).
+        convention, e.g. the hovercraft), -1 for models with the opposite sign (the USV).
     :param rudder_rate: rudder rate limit, rad/s; ``None`` (default) moves it instantaneously.
     :param rudder_index: position of the rudder in the input vector, for :meth:`apply`.
     :param heading_index: position of the heading in the state vector, for :meth:`apply`.
@@ -217,19 +218,11 @@ def _simulate(model: VehicleModel, x: FloatArray, u: FloatArray, d: FloatArray |
     ``command(x, t)`` at the start of every step. Returns states (T, n, n_x) and rudder angles
     (T, n)."""
     states, rudders = [x], []
-
-    def f(x: FloatArray, u: FloatArray) -> FloatArray:
-        return model.rhs(x, u, d)
-
     for i in range(steps):
         u = u.copy()
         u[:, rudder_index] = command(x, i * dt)
         rudders.append(u[:, rudder_index])
-        k1 = f(x, u)
-        k2 = f(x + 0.5 * dt * k1, u)
-        k3 = f(x + 0.5 * dt * k2, u)
-        k4 = f(x + dt * k3, u)
-        x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        x = rk4(lambda z, _t, u=u: model.rhs(z, u, d), x, dt)
         if not np.isfinite(x).all():
             raise FloatingPointError(f"manoeuvre diverged at t={(i + 1) * dt:g} s")
         states.append(x)
@@ -290,8 +283,8 @@ class ZigzagResult:
 
     @property
     def first_peak(self) -> Any:
-        """Heading change at the first overshoot peak, B + first overshoot, rad (MODELS.md's
-        "maximum heading")."""
+        """Heading change at the first overshoot peak, B + first overshoot, rad (the "maximum
+        heading" of docs/models.md 5.3)."""
         return self.switch + self.first_overshoot
 
     @property

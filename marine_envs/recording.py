@@ -22,7 +22,7 @@ Metadata, a JSON object
     ``model`` (required)
         Name of the vehicle model, one of :func:`marine_envs.models.model_names`.
     ``params`` (optional)
-        Parameter overrides by MODELS.md symbol, e.g. ``{"wn": 0.7}``; validated by the model.
+        Parameter overrides by docs/models.md symbol, e.g. ``{"wn": 0.7}``; validated by the model.
     ``units`` (optional)
         Unit of each column, e.g. ``{"time": "s", "phi": "deg"}``. Columns not listed are in the
         model's SI units. A unit in :data:`UNIT_CONVERSIONS` (degrees, knots, milliseconds, ...)
@@ -104,7 +104,7 @@ class Recording:
     :param data: columns ``time`` (s), the model's inputs, then the measured channels, in model
         order and SI units; any column order is accepted and normalised.
     :param model: model name, see :func:`marine_envs.models.model_names`.
-    :param params: parameter overrides by MODELS.md symbol (SI units).
+    :param params: parameter overrides by docs/models.md symbol (SI units).
     :param meta: free-form extra metadata (env id, seed, dt, policy, ...); JSON-serialisable.
     :param require_uniform: reject a non-uniform time step (not stored).
     :raises ValueError: the recording breaks the format; the message names the column or row.
@@ -142,7 +142,7 @@ class Recording:
         :param inputs: model inputs in the model's SI units, shape ``(n, n_u)``; ``(n,)`` is
             accepted for a single-input model.
         :param measurements: measured channels by state name, each shape ``(n,)``, SI units.
-        :param params: parameter overrides by MODELS.md symbol.
+        :param params: parameter overrides by docs/models.md symbol.
         :param meta: free-form extra metadata.
         :param require_uniform: reject a non-uniform time step.
         """

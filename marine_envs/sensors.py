@@ -158,11 +158,12 @@ class Quantizer(Stage):
 
 
 class ZoomingQuantizer(Stage):
-    """Dynamic ("zooming") uniform quantizer of seed 000, one zoom variable per channel group.
+    """Dynamic ("zooming") uniform quantizer of the USV observer patent, one zoom variable per
+    channel group.
 
-    ``law="relative"`` (the seed's, MODELS.md 1.4): ``mu = 2 k ||z|| / sqrt(m)`` for a group of
-    ``m`` channels, so ``||q(z) - z|| <= k ||z||`` with ``0 < k < 1``: the quantizer zooms in as
-    the signal shrinks. ``mu`` must reach the receiver as side information.
+    ``law="relative"`` (the patent's, docs/models.md 1.4): ``mu = 2 k ||z|| / sqrt(m)`` for a
+    group of ``m`` channels, so ``||q(z) - z|| <= k ||z||`` with ``0 < k < 1``: the quantizer
+    zooms in as the signal shrinks. ``mu`` must reach the receiver as side information.
 
     ``law="zoom"`` (Brockett-Liberzon): piecewise-constant ``mu`` on ``2 levels + 1`` levels;
     ``mu`` is multiplied by ``zoom_in`` (< 1) while the signal stays within ``margin`` of the range
@@ -347,7 +348,8 @@ class SensorSuite:
         ``sample_period`` gives each sensor's period in control steps (1 = every step).
         ``quantization`` gives the static step per channel (channel units), ``sensor_range`` the
         full scale (outputs clamped to +-range; wrapped angles need none); with
-        ``quantizer="zooming"`` it selects the channels quantized by the seed-000 zooming law.
+        ``quantizer="zooming"`` it selects the channels quantized by the USV observer patent's
+        zooming law.
         """
         stages: list[Stage] = []
         b = per_channel("bias", bias, channels)

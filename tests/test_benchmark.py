@@ -81,7 +81,7 @@ def test_a_rerun_resumes_and_different_settings_are_refused(tmp_path, monkeypatc
     def fail(*args):
         raise AssertionError("a finished cell ran again")
 
-    monkeypatch.setattr(benchmark, "run_cell", fail)
+    monkeypatch.setattr(benchmark.run, "run_cell", fail)  # where run_grid looks it up
     again = run_grid(grid, tmp_path, workers=1, progress=False)
     pd.testing.assert_frame_equal(first, again)
     with pytest.raises(ValueError, match="seeds"):
@@ -99,7 +99,8 @@ def test_outputs_and_report(tmp_path):
             "degradation.png"} <= names
     summary = (tmp_path / "summary.md").read_text()
     assert "| usv | moderate | noise=4 | lqr |" in summary
-    assert "hovercraft / pd / lqr / moderate / default: seed 000's PD observer" in summary
+    assert ("hovercraft / pd / lqr / moderate / default: the USV observer patent's PD observer"
+            in summary)
     page = write_report(rows, tmp_path, tmp_path / "report", grid).read_text()
     assert page.count("data:image/png;base64,") == 2 and "<table" in page
     assert pd.read_parquet(tmp_path / "rows.parquet").shape == rows.shape

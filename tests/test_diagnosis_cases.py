@@ -1,12 +1,12 @@
-"""The diagnosis acceptance set's scoring (marine_envs.diagnosis_cases) on hand-made diagnoses:
+"""The diagnosis acceptance set's scoring (estimators.diagnosis.cases) on hand-made diagnoses:
 no diagnosis is run, only the grading, the aggregates and the cases' effects."""
 
 from __future__ import annotations
 
 import pytest
 
-from estimators.discrepancy import Diagnosis, Finding
-from marine_envs.diagnosis_cases import (
+from estimators.diagnosis import Diagnosis, Finding
+from estimators.diagnosis.cases import (
     PAIRS,
     TARGETS,
     Case,
@@ -17,8 +17,8 @@ from marine_envs.diagnosis_cases import (
     sindy_term_to_effect,
     summarize,
 )
-from marine_envs.effects import CATALOGUE, Effect
 from marine_envs.models import get_model
+from marine_envs.models.effects import CATALOGUE, Effect
 
 DAMPING = Effect("quadratic_damping", "r", {"c": -2.0})
 BIAS = Effect("sensor_bias", "phi", {"b": 0.005})

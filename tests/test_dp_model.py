@@ -1,4 +1,4 @@
-"""The DP supply-vessel model against MODELS.md section 4 and the model protocol."""
+"""The DP supply-vessel model against docs/models.md section 4 and the model protocol."""
 
 import dataclasses
 import math
@@ -12,12 +12,12 @@ from marine_envs.models import get_model
 from marine_envs.models.base import VehicleModel
 from marine_envs.models.dp_vessel import DPVesselModel, DPVesselParams, wf_matrices
 
-# MODELS.md 4.1, printed digits
+# docs/models.md 4.1, printed digits
 M_PRINTED = np.array([[6.7644e6, 0, 0], [0, 1.13412e7, -3.401568e7], [0, -3.401568e7, 4.452378e9]])
 D_PRINTED = np.array([[7.707105e4, 0, 0], [0, 2.546789e5, -2.034159e6],
                       [0, -6.725849e5, 3.850073e8]])
 EIG_PRINTED = np.array([-0.087124, -0.022492, -0.011394])
-K_W_PRINTED = np.array([0.6928, 0.6325, 0.02262])  # MODELS.md 4.2 [PROPOSED]
+K_W_PRINTED = np.array([0.6928, 0.6325, 0.02262])  # docs/models.md 4.2 [PROPOSED]
 
 # a state away from the nominal point: heading 1 rad, moving, biased, waves running
 X_TEST = np.array([3.0, -2.0, 1.0, 0.8, -0.3, 0.01, 4e4, -2e4, 5e5,

@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from marine_envs.effects import (
+from estimators.diagnosis.synthetic import synthesize, typical_effect
+from marine_envs.models import get_model
+from marine_envs.models.effects import (
     CATALOGUE,
     ActuatorStream,
     Effect,
@@ -11,8 +13,6 @@ from marine_envs.effects import (
     applied_inputs,
     resonator,
 )
-from marine_envs.models import get_model
-from marine_envs.synthetic import synthesize, typical_effect
 
 USV = get_model("usv")
 

@@ -4,8 +4,9 @@ tracking with artificial process noise, the RTS smoother, missing data and bad i
 import numpy as np
 import pytest
 
-from estimators.ekf import ExtendedKalmanFilter, UnscentedKalmanFilter, rts_smooth
+from estimators.ekf import ExtendedKalmanFilter, rts_smooth
 from estimators.kalman import KalmanFilter
+from estimators.ukf import UnscentedKalmanFilter
 from marine_envs.models import get_model, zoh
 
 DT = 0.1

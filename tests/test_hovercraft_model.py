@@ -1,4 +1,5 @@
-"""The hovercraft model (MODELS.md section 5) and the manoeuvre tests (marine_envs.manoeuvres)."""
+"""The hovercraft model (docs/models.md section 5) and the manoeuvre tests
+(marine_envs.manoeuvres)."""
 
 import dataclasses
 import math
@@ -23,7 +24,7 @@ def model():
 @pytest.fixture(scope="module")
 def full_pitch_turns(model):
     """Rudder 0, 5, 15, 30 deg at full pitch (sigma = 1) from the 32 kn trim, one batch: the
-    0-deg run gives the top speed, the others MODELS.md 5.3's turning table."""
+    0-deg run gives the top speed, the others the turning table of docs/models.md 5.3."""
     return turning_circle(model, np.radians([0.0, 5.0, 15.0, 30.0]), inputs=[1.0, 1.0, 0.0],
                           duration=150.0, dt=0.1)  # steady values: dt-independent
 
@@ -45,7 +46,7 @@ def test_registry_names_and_bounds(model):
     low, high = m.u_bounds
     np.testing.assert_allclose(low, [-0.5, -0.5, -math.radians(30)])
     np.testing.assert_allclose(high, [1.0, 1.0, math.radians(30)])
-    assert m.params.resolved().Iz == pytest.approx(1.1268e7, rel=1e-4)  # MODELS.md 5.3
+    assert m.params.resolved().Iz == pytest.approx(1.1268e7, rel=1e-4)  # docs/models.md 5.3
 
 
 def test_equilibrium_at_the_nominal_point(model):
@@ -106,13 +107,14 @@ def test_rhs_batched_matches_loop(model):
 def test_top_speed_at_full_pitch(model, full_pitch_turns):
     res = full_pitch_turns
     assert res.steady[0]
-    assert res.surge[0] == pytest.approx(20.49, rel=0.01)  # MODELS.md 5.3: 20.49 m/s (39.8 kn)
+    # docs/models.md 5.3: 20.49 m/s (39.8 kn)
+    assert res.surge[0] == pytest.approx(20.49, rel=0.01)
     assert model.trim_pitch(20.49) == pytest.approx(1.0, abs=0.01)
     assert abs(res.states[-1, 0, 1]) < 1e-9 and abs(res.yaw_rate[0]) < 1e-9
 
 
 def test_turning_table_at_full_pitch(full_pitch_turns):
-    """MODELS.md 5.3 turning table; it holds at sigma = 1 (at the 32 kn trim pitch the turns
+    """docs/models.md 5.3 turning table; it holds at sigma = 1 (at the 32 kn trim pitch the turns
     are slower: r = 0.82/2.12/3.41 deg/s)."""
     res = full_pitch_turns
     assert res.steady[1:].all()
@@ -133,7 +135,7 @@ def test_positive_rudder_turns_to_starboard(model, full_pitch_turns):
 
 
 def test_zigzags_at_32_knots(zigzags):
-    """MODELS.md 5.3: maximum heading 6.0, 17.2, 27.7 deg (overshoot 1-2.7 deg)."""
+    """docs/models.md 5.3: maximum heading 6.0, 17.2, 27.7 deg (overshoot 1-2.7 deg)."""
     res = zigzags
     np.testing.assert_allclose(res.max_heading_deg[:3], [6.0, 17.2, 27.7], atol=0.15)
     assert (res.first_overshoot_deg[:3] > 0.8).all() and (res.first_overshoot_deg[:3] < 2.8).all()

@@ -1,4 +1,4 @@
-"""The hydrofoil model against MODELS.md section 2, and its wave coupling (2.5)."""
+"""The hydrofoil model against docs/models.md section 2, and its wave coupling (2.5)."""
 
 import dataclasses
 import math
@@ -13,7 +13,7 @@ from marine_envs.models.hydrofoil import HydrofoilModel, HydrofoilParams
 from marine_envs.sea import SeaState, WaveRealisation, wave_coupling
 from marine_envs.sea.coupling import HydrofoilWaveCoupling
 
-# MODELS.md 2.4, as printed
+# docs/models.md 2.4, as printed
 A_PRINTED = np.array([[0, 0, 1, 0],
                       [0, 0, 0, 1],
                       [-0.05882, -139.67344, -22.84472, -2.42760],

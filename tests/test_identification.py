@@ -15,7 +15,7 @@ from estimators.identification import (
     identify_staged,
     noise_std,
 )
-from estimators.identification import _fuse as fuse
+from estimators.identification.joint_ekf import _fuse as fuse
 from marine_envs.manoeuvres import zigzag
 from marine_envs.models.hovercraft import HovercraftModel
 from marine_envs.recording import Recording

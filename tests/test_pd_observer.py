@@ -1,4 +1,4 @@
-"""Seed 000's quantized-signal PD observer, its LMI, and the Luenberger baseline."""
+"""The USV observer patent's quantized-signal PD observer, its LMI, and the Luenberger baseline."""
 
 import dataclasses
 import json
@@ -31,7 +31,7 @@ def form():
 
 @pytest.fixture(scope="module")
 def seed_lmi(form):
-    """The seed's LMI (feasibility only) at alpha = 0.05."""
+    """The patent's LMI (feasibility only) at alpha = 0.05."""
     return design_pd_observer(form.A, form.D, form.C2, 0.05)
 
 
@@ -93,7 +93,7 @@ def test_too_large_alpha_raises_naming_the_decay_rate_and_the_largest_alpha(form
 
 
 def test_disturbance_on_the_angle_rows_is_not_detectable():
-    form_b = usv_standard_form(USVModel(USVParams(wave_input="angle")))  # MODELS.md 1.2 (b)
+    form_b = usv_standard_form(USVModel(USVParams(wave_input="angle")))  # docs/models.md 1.2 (b)
     assert form_b.standard_state_names[:2] == ("psi", "phi")
     with pytest.raises(LMIInfeasibleError, match="not detectable") as info:
         design_pd_observer(form_b.A, form_b.D, form_b.C2, 0.05)
@@ -327,7 +327,7 @@ def _sweep(form, seed_lmi, decoupled, scenario, seeds):
 
 @pytest.fixture(scope="module")
 def waves(form, seed_lmi, decoupled):
-    """With the seed's waves (5 seeds)."""
+    """With the patent's waves (5 seeds)."""
     return _sweep(form, seed_lmi, decoupled, CORRECTED, (0, 1, 2, 3, 4))
 
 

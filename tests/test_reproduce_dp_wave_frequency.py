@@ -1,4 +1,4 @@
-"""Seed 003's example through ``marine reproduce dp-wave-frequency``."""
+"""The DP wave-frequency patent's example through ``marine reproduce dp-wave-frequency``."""
 
 import json
 

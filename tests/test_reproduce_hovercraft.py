@@ -1,4 +1,4 @@
-"""``marine reproduce hovercraft-zigzag``: seed 004's staged EKF identification, as a command."""
+"""``marine reproduce hovercraft-zigzag``: the hovercraft EKF paper's staged EKF identification."""
 
 import json
 

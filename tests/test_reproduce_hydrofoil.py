@@ -1,4 +1,4 @@
-"""Seed 001's comparison: the adaptive KF against the fixed KF under LQR, on the hydrofoil."""
+"""The hydrofoil AKF paper's comparison: the adaptive KF against the fixed KF under LQR."""
 
 import json
 
@@ -7,7 +7,8 @@ from agents.reproduce import hydrofoil_akf
 
 
 def test_akf_beats_the_fixed_kf_in_the_document_setting():
-    """Table 2 of seed 001: the AKF cuts the pitch error by 38 % and the heave error by 7 %."""
+    """Table 2 of the hydrofoil AKF paper: the AKF cuts the pitch error by 38 % and the heave
+    error by 7 %."""
     document = hydrofoil_akf.settings()[0]
     runs = {label: hydrofoil_akf.fly(document, label, seeds=2, steps=2400)
             for label in ("akf", "kf")}

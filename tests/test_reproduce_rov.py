@@ -1,4 +1,4 @@
-"""``marine reproduce rov-online-id``: seed 002's online identification, as a command."""
+"""``marine reproduce rov-online-id``: the morphing-robot patent's online identification."""
 
 import json
 

@@ -1,4 +1,5 @@
-"""Seed 002: the ROV model's coefficient interface, and online identification through a morph."""
+"""The morphing-robot patent: the ROV model's coefficient interface, and online identification
+through a morph."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""The ROV model against MODELS.md section 3 and independent reference implementations."""
+"""The ROV model against docs/models.md section 3 and independent reference implementations."""
 
 import dataclasses
 import itertools
@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from marine_envs.models import get_model
+from marine_envs.models.integrate import rk4
 from marine_envs.models.rov import (
     THRUSTER_ALLOCATION,
     THRUSTER_LIMITS,
@@ -15,11 +16,11 @@ from marine_envs.models.rov import (
     allocate,
 )
 
-# MODELS.md 3.5, printed
+# docs/models.md 3.5, printed
 B_T_PRINTED = np.array([[1, 1, 0, 0, 0, 0], [0, 0, 1, 1, 0, 0], [0, 0, 0, 0, 1, 1],
                         [0, 0, 0, 0, 0, 0], [0, 0, 0, 0, -0.35, 0.40],
                         [0.10, -0.10, 0.40, -0.45, 0, 0]])
-# MODELS.md 3.4 table: name -> (cruise, work)
+# docs/models.md 3.4 table: name -> (cruise, work)
 MORPH_TABLE = {
     "Xuu": (-1.62, -15.30), "Yvv": (-131, -142.33), "Zww": (-131, -139.01),
     "Yrr": (0.632, -6.52), "Zqq": (-0.632, 4.42), "Mww": (3.18, 9.49), "Mqq": (-188, -192.11),
@@ -46,7 +47,7 @@ def skew(a):
 
 
 def reference_rhs(model, x, u, d):
-    """MODELS.md 3.2 written literally with Fossen's matrices, one boat at a time."""
+    """docs/models.md 3.2 written literally with Fossen's matrices, one boat at a time."""
     k = model.params
     s = x[S]
     c = model.coefficients(s)
@@ -316,7 +317,7 @@ def test_linearize_agrees_with_an_independent_finite_difference():
 @pytest.mark.parametrize("s", [0.0, 1.0])
 def test_bg_pendulum_at_hover_matches_the_restoring_stiffness(s):
     """At hover Prestero's damping is quadratic: roll and pitch are undamped BG pendulums with
-    omega^2 = -eig((M^-1 G)[p, q rows]), G the restoring stiffness of MODELS.md 3.2."""
+    omega^2 = -eig((M^-1 G)[p, q rows]), G the restoring stiffness of docs/models.md 3.2."""
     model = ROVModel()
     k, c = model.params, model.coefficients(s)
     A, _, _ = model.linearize(hover(s), model.trim_forces(0.0, s))
@@ -389,11 +390,7 @@ def simulation():
     record = {"s_at_T_m": None, "relative": [relative_speed(x)]}
     for i in range(1, steps + 1):
         u = control(x)
-        k1 = model.rhs(x, u, d)
-        k2 = model.rhs(x + 0.5 * dt * k1, u, d)
-        k3 = model.rhs(x + 0.5 * dt * k2, u, d)
-        k4 = model.rhs(x + dt * k3, u, d)
-        x = x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x = rk4(lambda z, _t, u=u: model.rhs(z, u, d), x, dt)
         if i * dt == pytest.approx(model.params.T_m):
             record["s_at_T_m"] = x[3, S]
         if i % 400 == 0:

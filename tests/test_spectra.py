@@ -52,7 +52,8 @@ def test_peak_frequency_is_2pi_over_tp(kind, tp):
 def test_one_parameter_pm_peak_and_models_md_formula(hs):
     S = pierson_moskowitz(OMEGA, hs)
     assert peak_frequency(OMEGA, S) == pytest.approx(1.2561 / math.sqrt(hs), rel=1e-2)
-    # MODELS.md form A w^-5 exp(-B w^-4); it integrates to 1.0013 hs, hence the 0.5 % tolerance.
+    # The form A w^-5 exp(-B w^-4) of docs/models.md 2.5; it integrates to 1.0013 hs, hence the
+    # 0.5 % tolerance.
     reference = 8.1e-3 * G**2 * OMEGA**-5 * np.exp(-3.11 / hs**2 * OMEGA**-4)
     assert np.max(np.abs(S - reference)) < 5e-3 * reference.max()
 

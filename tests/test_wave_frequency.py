@@ -1,4 +1,5 @@
-"""Seed 003: wave-frequency estimation for the DP vessel and the wave filter it retunes."""
+"""The DP wave-frequency patent: wave-frequency estimation for the DP vessel and the wave
+filter it retunes."""
 
 import dataclasses
 import math
@@ -44,7 +45,8 @@ def test_butterworth_sos_stops_low_frequency_and_passes_wave_frequency():
 
 
 def test_document_example_converges_within_one_300s_window(record):
-    """True (1.2, 1.0, 1.05), start (0.4, 0.4, 0.55), Ts 0.5 s, 300 s, the seed's R and P0."""
+    """True (1.2, 1.0, 1.05), start (0.4, 0.4, 0.55), Ts 0.5 s, 300 s, the DP
+    wave-frequency patent's R and P0."""
     est = estimate_window(record.y[:600, 0], 0.5, DOC)
     assert est.accepted and est.reasons == [""]
     assert np.all(np.abs(est.omega - TRUE) < 0.05)
@@ -56,9 +58,9 @@ def test_document_example_converges_within_one_300s_window(record):
 
 
 def test_twenty_seeded_runs_within_tolerance(record):
-    """With the seed's 600 s window every run is within 0.05 rad/s in all DOF; with 300 s the
-    Cramer-Rao bound (std ~0.02 rad/s per DOF) caps it near 95 % (the reproduction reports
-    both)."""
+    """With the DP wave-frequency patent's 600 s window every run is within 0.05 rad/s in all
+    DOF; with 300 s the Cramer-Rao bound (std ~0.02 rad/s per DOF) caps it near 95 % (the
+    reproduction reports both)."""
     long = estimate_window(record.y, 0.5, WaveFrequencyConfig(window=600.0))
     within = (np.abs(long.omega - TRUE) < 0.05).all(axis=1)
     assert within.mean() >= 0.95 and long.accepted.all()
@@ -78,7 +80,7 @@ def test_acceptance_rejects_windows_without_wave_motion():
 
 def test_acceptance_rejects_an_estimate_far_from_the_spectral_peak(record):
     """The document's filter taken literally (its Q, one pass from the initial guess) often ends
-    far from the truth; the seed's |omega - theta0| < 0.2 rad/s test throws those out."""
+    far from the truth; the patent's |omega - theta0| < 0.2 rad/s test throws those out."""
     literal = WaveFrequencyConfig(window=300.0, process_noise="seed", acquisition=False,
                                   highpass_correction=False)
     est = estimate_window(record.y[:600, :6], 0.5, literal)

@@ -187,7 +187,7 @@ def test_encounter_frequency_by_heading():
     np.testing.assert_allclose(encounter_frequency(omega, speed, 0.0), omega - shift)
     np.testing.assert_allclose(encounter_frequency(omega, speed, math.pi / 2), omega)
     np.testing.assert_array_equal(encounter_frequency(omega, 0.0, 1.0), omega)
-    # MODELS.md 2.5: beta = 120 deg, U = 6.08 m/s
+    # docs/models.md 2.5: beta = 120 deg, U = 6.08 m/s
     np.testing.assert_allclose(encounter_frequency(omega, 6.08, math.radians(120)),
                                omega + 0.3099 * omega**2, rtol=1e-4)
 

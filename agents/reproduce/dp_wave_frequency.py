@@ -1,4 +1,5 @@
-"""Seed 003: EKF estimation of the DP vessel's wave-frequency model, and the model update.
+"""The DP wave-frequency patent: EKF estimation of the DP vessel's wave-frequency model, and
+the model update.
 
 The document's example: true peak frequencies (1.2, 1.0, 1.05) rad/s in (x, y, psi), initial
 guess (0.4, 0.4, 0.55), damping 0.1, Ts = 0.5 s, a 300 s window, R = diag(1e-3, 1e-3, 2e-2),
@@ -8,7 +9,7 @@ sensor noise), seeded. Reported:
 
 * the document's example (seed 0): FFT pre-estimate, EKF estimate, acceptance, convergence time;
 * 20 seeds: fraction within 0.05 rad/s in all three DOF, per-DOF errors, with the 300 s window
-  and with the seed's default 600 s window, against the Cramer-Rao bound of a window;
+  and with the patent's default 600 s window, against the Cramer-Rao bound of a window;
 * the document's filter taken literally (its Q, one pass from the initial guess) and with psi
   in rad, to show why :mod:`estimators.wave_frequency` deviates;
 * records without WF motion (the acceptance test must reject them);
@@ -171,7 +172,7 @@ def settings_compared(record: Record, window: float, names: Sequence[str] | None
     through the corrected pipeline's pieces one at a time off."""
     steps = round(window / DT)
     variants = {
-        "document_literal": ("the seed's Q (0.5-0.8 per step on the WF states, 5e-3/5e-2 on "
+        "document_literal": ("the patent's Q (0.5-0.8 per step on the WF states, 5e-3/5e-2 on "
                              "omega), one pass of the document's EKF from (0.4, 0.4, 0.55), no "
                              "bias removal; R and P0 psi entries in deg^2",
                              dict(process_noise="seed", acquisition=False,
@@ -181,7 +182,7 @@ def settings_compared(record: Record, window: float, names: Sequence[str] | None
         "no_highpass_correction": ("both passes, the high-pass bias not removed",
                                    dict(highpass_correction=False)),
         "causal_highpass": ("sosfilt instead of sosfiltfilt", dict(zero_phase=False)),
-        "psi_in_rad": ("the seed's R and P0 psi entries read as rad^2 (2e-2 rad^2 = 8 deg of "
+        "psi_in_rad": ("the patent's R and P0 psi entries read as rad^2 (2e-2 rad^2 = 8 deg of "
                        "noise on 2 deg of WF yaw)",
                        dict(R=(1e-3, 1e-3, 2e-2),
                             P0=(1e5, 1e5, 1e7, 1e5, 1e5, 1e7, 1e3, 1e3, 1e6))),
@@ -205,7 +206,7 @@ def no_wave_motion(seeds: int) -> dict[str, Any]:
     record = simulate(seeds, [(WINDOW, OMEGA_TRUE)], seed=500,
                       params={"sigma_eta": [1e-6, 1e-6, 1e-8]})
     est = estimate_window(record.y, DT, WaveFrequencyConfig(window=WINDOW))
-    # the seed's test alone, against the periodogram's largest bin in the band
+    # the patent's test alone, against the periodogram's largest bin in the band
     w, psd = est.spectrum.frequencies, est.spectrum.psd
     band = (w >= 0.3) & (w <= 1.6)
     largest = w[band][np.argmax(psd[band], axis=0)]
@@ -372,7 +373,7 @@ def _text(s: dict[str, Any]) -> str:
                 f"|error| (x, y, psi) rad/s: {errs}   CRLB std {_fmt(block['cramer_rao_std'])}")
     change = s["sea_change"]
     lines = [
-        "seed 003: EKF estimation of the DP vessel's wave-frequency model",
+        "the DP wave-frequency patent: EKF estimation of the DP vessel's wave-frequency model",
         f"document example (seed 0, 300 s, Ts 0.5 s): true {_fmt(s['omega_true'])}, initial "
         f"{_fmt(s['omega_initial'])} rad/s",
         f"  FFT pre-estimate theta0 {_fmt(s['omega_fft'])}   EKF {_fmt(s['omega_estimate'])} "
@@ -380,7 +381,7 @@ def _text(s: dict[str, Any]) -> str:
         f"  converged (all DOF within 0.05 rad/s for good) after {s['convergence_time_s']} s "
         f"(acquisition pass: {s['acquisition_convergence_time_s']} s)",
         f"{s['seeds']['runs']} seeds:", row(s["seeds"], "300 s window"),
-        row(s["seeds_600s_window"], "600 s window (seed)"),
+        row(s["seeds_600s_window"], "600 s window (patent)"),
         "settings (300 s window, same records): fraction within 0.05 / accepted",
     ]
     for name, r in s["settings_compared"].items():
@@ -388,7 +389,7 @@ def _text(s: dict[str, Any]) -> str:
                      f"   {r['why']}")
     q = s["no_wave_motion"]
     lines.append(f"no WF motion ({q['runs']} runs): accepted {q['accepted_fraction']:.0%} "
-                 f"(the seed's |omega - theta0| test alone: "
+                 f"(the patent's |omega - theta0| test alone: "
                  f"{q['seed_test_alone_accepted_fraction']:.0%}, passed by "
                  f"{q['seed_test_alone_dof_pass_fraction']:.0%} of the channels); largest "
                  f"spectral peak {q['max_interior_peak_snr'] or 0:.1f} x the noise floor")

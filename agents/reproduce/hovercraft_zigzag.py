@@ -1,6 +1,7 @@
-"""Seed 004: staged EKF identification of the hovercraft's manoeuvring coefficients from zig-zags.
+"""The hovercraft EKF paper: staged EKF identification of the hovercraft's manoeuvring
+coefficients from zig-zags.
 
-The document (Xiao, Hu & Liu 2020) appends unknown coefficients of its LCAC model to the state
+The paper (Xiao, Hu & Liu 2020) appends unknown coefficients of its LCAC model to the state
 of an EKF and identifies them in stages: the linear terms from a 5/5 zig-zag, the nonlinear ones
 from 15/15 and 25/25. It reports the linear ones as accurate and the nonlinear ones as poor (it
 gives no numbers). This reproduction runs that experiment on Hovercraft-v0 and compares it with a
@@ -297,7 +298,7 @@ def _comparison(summary: dict[str, Any]) -> str:
 def _text(summary: dict[str, Any]) -> str:
     c = summary["coefficients"]
     cond = summary["conditions"]
-    lines = [f"seed 004 hovercraft: staged EKF identification from zig-zags "
+    lines = [f"the hovercraft EKF paper: staged EKF identification from zig-zags "
              f"{', '.join(cond['manoeuvres'])} ({cond['duration_per_zigzag_s']:.0f} s each, "
              f"{cond['seeds']} seed(s); table: seed 0)", ""]
     head = (f"{'coef':7} {'kind':9} {'true':>10} {'joint EKF':>11} {'+-std':>9} {'err':>7} "
@@ -341,7 +342,7 @@ def _plot(run: dict[str, Any], traces: dict[str, tuple[Segment, np.ndarray]], pa
         ax.plot(t, np.degrees(segment.unwrapped()[:, 3]), lw=0.6, label="heading measured")
         ax.plot(t, np.degrees(states[:, 5]), "k", lw=0.8, label="heading true")
         ax.plot(t, np.degrees(segment.inputs[:, 2]), lw=1.0, label="rudder")
-        ax.set_title(f"{name} zig-zag (fig. 2-4 of seed 004)")
+        ax.set_title(f"{name} zig-zag (fig. 2-4 of the hovercraft EKF paper)")
         ax.set_xlabel("time (s)")
         ax.set_ylabel("deg")
         ax.grid(alpha=0.3)

@@ -1,6 +1,6 @@
-"""Seed 001: LQR attitude control of the hydrofoil fed by a Kalman and an adaptive Kalman filter.
+"""The hydrofoil AKF paper: LQR attitude control of the hydrofoil fed by a KF and an adaptive KF.
 
-The document (table 2) flies its craft through a Pierson-Moskowitz sea whose significant height
+The paper (table 2) flies its craft through a Pierson-Moskowitz sea whose significant height
 changes with time, met at 120 deg, with LQR Q = diag(0, 100, 0, 1000), R = I2, and compares the
 RMS pitch and heave errors with a KF and with its adaptive KF (WQmin = diag(1, 1, 0.3, 0.3),
 WQmax = diag(10, 10, 3, 3), WR = 0.003 I4, switched by the innovation chi-square test).
@@ -8,7 +8,7 @@ WQmax = diag(10, 10, 3, 3), WR = 0.003 I4, switched by the innovation chi-square
 Two settings are run on the same seas and sensor noise (common random numbers):
 
 * ``document``: the document's numbers. Its sensor noise (variance 0.003: 3.1 deg on pitch)
-  dwarfs the wave-induced motion (MODELS.md 2.5), so the comparison is about noise smoothing.
+  dwarfs the wave-induced motion (docs/models.md 2.5), so the comparison is about noise smoothing.
 * ``corrected``: sensors of a real craft (IMU and altimeter grade), so the waves matter, and
   process noises derived from the sea itself: ``Q_min`` from the calm part of the schedule,
   ``Q_max`` from the rough part. This is the question the document asks: does adapting WQ to a
@@ -87,10 +87,10 @@ def settings() -> list[Setting]:
     rough = lambda e: _sea_noise(ROUGH_HS)  # noqa: E731
     r_real = np.diag(np.array(list(REAL_SENSORS.values())) ** 2)
     return [
-        Setting("document", "seed 001 as given: sensor noise variance 0.003 on every channel, "
-                "WQmin/WQmax/WR of the paper; the fixed-WQ KF is not specified by the paper: "
-                "kf uses WQmax (the only fixed choice under which an adaptive filter can win), "
-                "kf_wqmin uses WQmin",
+        Setting("document", "the hydrofoil AKF paper as given: sensor noise variance 0.003 on "
+                "every channel, WQmin/WQmax/WR of the paper; the fixed-WQ KF is not specified "
+                "by the paper: kf uses WQmax (the only fixed choice under which an adaptive "
+                "filter can win), kf_wqmin uses WQmin",
                 {},
                 {"kf": lambda e: KalmanFilter.for_env(e, Q=doc_max(e), R=WR),
                  "kf_wqmin": lambda e: KalmanFilter.for_env(e, Q=doc_min(e), R=WR),
@@ -187,15 +187,15 @@ def _summary(all_settings: list[Setting], results: dict, seeds: int, steps: int)
     summary["settings"] = {s.name: s.why for s in all_settings}
     summary["conditions"] = {
         "seeds": seeds, "duration_s": steps * 0.05, "dt_s": 0.05,
-        "sea": "PM, Hs 0.10 -> 0.30 -> 0.15 m over 600 s (MODELS.md 2.5), encounter 120 deg",
+        "sea": "PM, Hs 0.10 -> 0.30 -> 0.15 m over 600 s (docs/models.md 2.5), encounter 120 deg",
         "lqr": "discrete LQR, Q = diag(0.1, 100, 0, 1000) (the document's plus 0.1 on heave), "
-               "R = I2, on the filter's estimate; nonlinear craft model (MODELS.md 2.3)",
+               "R = I2, on the filter's estimate; nonlinear craft model (docs/models.md 2.3)",
         "errors": "RMS of the true heave and pitch deviations from trim over the whole run"}
     return summary
 
 
 def _text(summary: dict[str, Any]) -> str:
-    lines = ["seed 001 hydrofoil: LQR on KF vs adaptive KF estimates "
+    lines = ["The hydrofoil AKF paper: LQR on KF vs adaptive KF estimates "
              f"({summary['conditions']['seeds']} seeds x {summary['conditions']['duration_s']:.0f}"
              " s; mean +- std over seeds)", ""]
     header = f"{'setting':10} {'filter':9} {'pitch RMS (deg)':>17} {'heave RMS (m)':>19} " \
@@ -242,7 +242,7 @@ def _plot(results: dict, steps: int, path: Path) -> None:
                         alpha=0.8 if label == "kf" else 1.0)
             ax.set_ylabel(unit)
             ax.grid(alpha=0.3)
-        axes[0, col].set_title(f"{name} setting (fig. 7 and 8 of seed 001)")
+        axes[0, col].set_title(f"{name} setting (fig. 7 and 8 of the hydrofoil AKF paper)")
         axes[0, col].legend(loc="upper right")
         axes[1, col].set_xlabel("time (s)")
     fig.tight_layout()

@@ -1,12 +1,12 @@
-"""Seed 002: online identification of a morphing ROV's viscous coefficients, and feed-forward.
+"""The morphing-robot patent: online identification of an ROV's viscous coefficients, feed-forward.
 
-The seed (a 2022 patent) runs a Kalman filter on the joint state ``[omega; nu]`` (the 18 viscous
+The patent (2022) runs a Kalman filter on the joint state ``[omega; nu]`` (the 18 viscous
 coefficients and the velocities), with the DVL (u, v, w) and a fibre-optic gyro (attitude and
 rates) as its only sensors and an ARTIFICIAL process noise on the coefficients so that the
 estimates follow the morph from the cruise to the work shape; the identified coefficients feed a
 thrust feed-forward. It gives no numbers, so this reproduction states its own experiment:
 
-* Plant: ROV-v0 (Prestero's REMUS-100, MODELS.md 3), force actuation without a roll moment (the
+* Plant: ROV-v0 (Prestero's REMUS-100, docs/models.md 3), force actuation without a roll moment (the
   thrusters have none), still water (see "Current" below), sensors as ROV-v0 (DVL at 5 Hz, gyro
   and depth cell at 10 Hz). The morph command comes at ``morph_time``; the hull follows with
   T_m = 5 s.
@@ -40,8 +40,8 @@ thrust feed-forward. It gives no numbers, so this reproduction states its own ex
   gains: ``feedforward`` uses the identified coefficients, ``nominal`` the cruise values.
 
 Current: the DVL measures velocity over ground while the drag acts on the velocity through the
-water; an unknown current would be read as drag. The seed does not estimate one, so the
-experiment is in still water.
+water; an unknown current would be read as drag. The patent does not estimate one, so
+the experiment is in still water.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ PRIOR_FRACTION = 0.5
 #: negligible for control, per force row; they set each coefficient's floor scale.
 TYPICAL_MOTION = np.array([1.5, 0.2, 0.2, 0.2, 0.2, 0.2])
 NEGLIGIBLE_FORCE = {"X": 0.5, "Y": 0.5, "Z": 0.5, "K": 0.05, "M": 0.5, "N": 0.5}
-#: Force uncertainty per row of the filter's process noise (N, N m): the seed's R(tau).
+#: Force uncertainty per row of the filter's process noise (N, N m): the patent's R(tau).
 FORCE_NOISE = np.array([0.5, 0.5, 0.5, 0.05, 0.1, 0.1])
 #: Tracked coefficients (the surge and yaw quadratic drag) and the tolerance.
 TRACKED = ("Xuu", "Nrr")
@@ -363,8 +363,8 @@ def _control_summary(run: dict[str, Any], rows: slice) -> dict[str, Any]:
 def _conditions(run: dict[str, Any]) -> dict[str, Any]:
     return {
         "seeds": run["seeds"], "duration_s": float(run["time"][-1]), "dt_s": DT,
-        "plant": "ROV-v0 (Prestero REMUS-100, MODELS.md 3), force actuation without roll "
-                 "moment, still water, DVL 5 Hz + gyro + depth 10 Hz (ROV-v0 noise)",
+        "plant": "ROV-v0 (Prestero REMUS-100, docs/models.md 3), force actuation without "
+                 "roll moment, still water, DVL 5 Hz + gyro + depth 10 Hz (ROV-v0 noise)",
         "excitation": dataclasses.asdict(Excitation()),
         "parameter_noise": f"q_i = {RATE} * scale_i per sqrt(s), scale_i = max(|c_i|, value "
                            "giving 0.5 N or N m (roll 0.05 N m) at 1.5 m/s, 0.2 m/s, 0.2 rad/s)",
@@ -393,7 +393,7 @@ def reproduce(quick: bool = False, progress: bool = True) -> Reproduction:
 
 def _text(summary: dict[str, Any]) -> str:
     c = summary["conditions"]
-    lines = [f"seed 002 morphing ROV: online identification of 18 viscous coefficients "
+    lines = [f"The morphing-robot patent: online identification of 18 viscous coefficients "
              f"({c['seeds']} seeds x {c['duration_s']:.0f} s, morph at "
              f"{summary['morph_time']:.0f} s; estimates are means over seeds)", "",
              f"{'coef':5} {'true before':>12} {'estimate':>10} {'std':>8} {'true after':>11} "
@@ -446,8 +446,8 @@ def _plot(run: dict[str, Any], path: Path) -> None:
         ax.set_title(name, fontsize=10)
         ax.grid(alpha=0.3)
     _plot_errors(fig, grid, run)
-    fig.suptitle("seed 002: coefficient estimates (one line per seed, +-2 std band of seed 0) "
-                 "vs the true values; morph at the grey line", fontsize=11)
+    fig.suptitle("The morphing-robot patent: coefficient estimates (one line per seed, +-2 std "
+                 "band of seed 0) vs the true values; morph at the grey line", fontsize=11)
     fig.tight_layout(rect=(0, 0, 1, 0.98))
     fig.savefig(path, dpi=90)
     plt.close(fig)

@@ -1,22 +1,22 @@
-"""Seed 000 re-run: the USV's sway speed from quantized network data, PD observer vs Luenberger.
+"""USV observer patent re-run: the USV's sway speed from quantized network data, PD vs Luenberger.
 
-The document's example (MODELS.md 1.2-1.4): ``u = 0.1 sin t`` rad, ``w_psi`` uniform in
+The patent's example (docs/models.md 1.2-1.4): ``u = 0.1 sin t`` rad, ``w_psi`` uniform in
 ``[-0.5, 0.5]`` rad/s^2 redrawn every 0.01 s and held, ``w_phi = 0.2 sin 10t`` rad/s^2,
 ``mu2 = 0.5`` rad, ``k = 0.6``, ``delta = 0.01``, ``rho = 0.6``. The plant is stepped exactly
-(zero-order hold) at 1 ms for 60 s and every observer samples every step. [PROPOSED] where the seed
-is silent: the plant starts at ``v = 0.01`` m/s (other states 0) and the observers at 0, so the
-figure shows convergence; the LMI decay rate is ``alpha = 0.05`` 1/s.
+(zero-order hold) at 1 ms for 60 s and every observer samples every step. [PROPOSED] where the
+patent is silent: the plant starts at ``v = 0.01`` m/s (other states 0) and the observers at 0,
+so the figure shows convergence; the LMI decay rate is ``alpha = 0.05`` 1/s.
 
 Why a corrected setting. With the document's numbers ``|phi| <= 0.04`` rad and ``|psi|`` mostly
 below ``mu2 / 2 = 0.25`` rad, so ``q(phi)`` and ``q(psi)`` are (almost) always 0: ``y2`` carries
-no information and nothing depends on ``mu2`` (MODELS.md 1.4). The corrected setting scales the
+no information and nothing depends on ``mu2`` (docs/models.md 1.4). The corrected setting scales the
 quantizer to the signals (``mu2 = 0.01`` rad, 0.57 deg, a common compass/AHRS resolution) and
 weaves the rudder harder and slower (20 deg at 0.1 rad/s): the sway mode's 10 s time constant
 filters a 1 rad/s rudder down to ``|v| ~ 1e-3`` m/s, the slow weave gives ``|v| ~ 0.02`` m/s and
 heading swings of ~0.6 rad. It uses the ``"decoupled"`` LMI (``estimators.pd_observer``): the
-seed's feasibility-only LMI lets the quantization error into the sway estimate, so its error grows
+patent's feasibility-only LMI lets the quantization error into the sway estimate, so its error grows
 with ``mu2``; the decoupled design removes it exactly. Two ``mu2`` sweeps on the corrected signals
-(with the seed's waves, and in calm water where quantization is the only error source) show it.
+(with the patent's waves, and in calm water where quantization is the only error source) show it.
 """
 
 from __future__ import annotations
@@ -59,7 +59,7 @@ class Scenario:
     mu2: float  #: step of quantizer 2 (and of the classical network), rad
     rudder: float  #: rudder amplitude, rad
     rudder_frequency: float  #: rad/s
-    objective: str  #: LMI objective of the setting's PD observer ("feasibility" = the seed's)
+    objective: str  #: LMI objective of the setting's PD observer ("feasibility" = the patent's)
     w_psi: float = 0.5  #: half-width of the uniform yaw disturbance, rad/s^2
     w_psi_hold: float = 0.01  #: hold time of each yaw-disturbance draw, s
     w_phi: float = 0.2  #: roll disturbance amplitude, rad/s^2
@@ -83,9 +83,9 @@ SWEEP_MU2: tuple[float, ...] = (0.003, 0.01, 0.03, 0.1, 0.3, 1.0)
 SEEDS, QUICK_SEEDS = (0, 1, 2, 3, 4), (0, 1)
 QUICK_DURATION = 4.0  #: s
 #: Observers simulated in every run, and their labels.
-LABELS = {"pd_seed_lmi": "PD, seed's LMI", "pd_decoupled": "PD, decoupled LMI",
+LABELS = {"pd_seed_lmi": "PD, patent's LMI", "pd_decoupled": "PD, decoupled LMI",
           "luenberger": "Luenberger"}
-SHORT = {"pd_seed_lmi": "PD seed LMI", "pd_decoupled": "PD decoupled", "luenberger": "Luenberger"}
+SHORT = {"pd_seed_lmi": "PD patent LMI", "pd_decoupled": "PD decoupled", "luenberger": "Luenberger"}
 #: The PD observer a setting reports as ``pd_observer`` (by LMI objective)...
 MAIN = {"feasibility": "pd_seed_lmi", "decoupled": "pd_decoupled"}
 #: ... and the other one, with its summary key.
@@ -208,7 +208,7 @@ class _Metrics:
 
 # -- the reproduction --------------------------------------------------------------------------
 NOTES = (
-    "Top level: the DOCUMENT's setting (u = 0.1 sin t rad, mu2 = 0.5 rad, the seed's "
+    "Top level: the DOCUMENT's setting (u = 0.1 sin t rad, mu2 = 0.5 rad, the patent's "
     "feasibility-only LMI). It is degenerate: q(phi) and q(psi) are (almost) always 0 (see "
     "signals), so y2 carries no information; the Luenberger observer, fed zeros, then reports "
     "v_hat ~ 0, which is close to the tiny true v. 'corrected': mu2 = 0.01 rad (scaled to the "
@@ -218,7 +218,7 @@ NOTES = (
     "invariant zero of the wave-disturbance channel, so with d unknown no measured channel says "
     "more about v than the model does: the decoupled PD observer's v error is the initial error "
     "decaying as exp(-t/Tv), whatever mu2 and d (a classical observer converges faster in calm "
-    "water with fine quantization, see mu2_sweep.calm_water). The seed's LMI leaves Ls's sway "
+    "water with fine quantization, see mu2_sweep.calm_water). The patent's LMI leaves Ls's sway "
     "row free, and its v error grows with mu2. The LMI is feasible for alpha < 1/Tv = 0.1 only: "
     "with the matching condition (block-diagonal P) the sway mode cannot be moved. The "
     "Luenberger baseline (poles -0.15..-0.35 1/s) gets every output quantized with step mu2; "
@@ -231,8 +231,8 @@ NOTES = (
 
 
 def reproduce(quick: bool = False, progress: bool = True) -> Reproduction:
-    """Re-run seed 000's example in the document's and the corrected setting, plus ``mu2``
-    sweeps on the corrected signals (with waves, and in calm water).
+    """Re-run the USV observer patent's example in the document's and the corrected setting,
+    plus ``mu2`` sweeps on the corrected signals (with waves, and in calm water).
 
     :param quick: two seeds and a 4 s run (a smoke test of a few seconds).
     :param progress: show a progress bar (simulated seconds; the seeds run as one batch).
@@ -327,8 +327,8 @@ def _text(summary: Mapping[str, Any], seeds: Sequence[int], duration: float) -> 
     def cell(block: Mapping[str, Any], key: str) -> str:
         return f"{block[key]:9.2e} +- {block[key + '_spread']['std']:7.1e}"
 
-    lines = [f"USV quantized-signal PD observer (seed 000): {len(seeds)} seeds, {duration:g} s at "
-             "dt = 1 ms; mean +- std over seeds",
+    lines = [f"USV quantized-signal PD observer (the USV observer patent): {len(seeds)} seeds, "
+             f"{duration:g} s at dt = 1 ms; mean +- std over seeds",
              f"{'setting':<10} {'observer':<20} {'v RMSE, 2nd half (m/s)':<24} "
              "max|v err|, last 25% (m/s)"]
     for label, block in (("document", summary), ("corrected", summary["corrected"])):
@@ -348,13 +348,13 @@ def _text(summary: Mapping[str, Any], seeds: Sequence[int], duration: float) -> 
               f"document signals: q(psi) = 0 in {signals['fraction_q_psi_zero']:.0%} and "
               f"q(phi) = 0 in {signals['fraction_q_phi_zero']:.0%} of the samples",
               "", "mu2 sweeps on the corrected signals: max|v err| over the last 25 % (m/s)",
-              f"{'':>10} {'with the seed waves':^38} {'calm water':^38}",
-              f"{'mu2 (rad)':>10} " + 2 * "".join(f"{SHORT[k]:>13}" for k in LABELS)]
+              f"{'':>10} {'with the patent waves':^41} {'calm water':^41}",
+              f"{'mu2 (rad)':>10} " + 2 * "".join(f"{SHORT[k]:>14}" for k in LABELS)]
     sweep = summary["mu2_sweep"]
     for i, mu2 in enumerate(sweep["mu2"]):
         cells = [sweep[case][k]["v_error_final_bound"][i] for case in ("waves", "calm_water")
                  for k in LABELS]
-        lines.append(f"{mu2:>10g} " + "".join(f"{c:>13.2e}" for c in cells))
+        lines.append(f"{mu2:>10g} " + "".join(f"{c:>14.2e}" for c in cells))
     lines += ["", *textwrap.wrap(summary["notes"], 100)]
     return "\n".join(lines)
 

@@ -1,9 +1,10 @@
 """Gymnasium front ends of the batched :class:`~marine_envs.envs.core.Simulator`.
 
 :class:`MarineEnv` is a single environment (a batch of one); :class:`MarineVectorEnv` is its native
-vector twin (a batch of N, no Python loop over boats while stepping). Both follow ARCHITECTURE.md
-contract 2: observations are sensor outputs, ``info["state"]`` is the true state,
-``info["action_applied"]`` the physical input, and the reward is minus the task's quadratic cost.
+vector twin (a batch of N, no Python loop over boats while stepping), made for each vehicle by
+:func:`vector_env`. Both follow docs/architecture.md contract 2: observations are sensor outputs,
+``info["state"]`` is the true state, ``info["action_applied"]`` the physical input, and the reward
+is minus the task's quadratic cost.
 """
 
 from __future__ import annotations
@@ -27,6 +28,8 @@ _ONE = np.array([0])
 #: Builds the object whose ``draw(x, u, time)`` returns an RGB frame (and ``close()``);
 #: default: strip charts (:class:`~marine_envs.envs.rendering.TimeSeriesRenderer`).
 RendererFactory = Callable[[], Any]
+#: A vehicle's own renderer class, built from its model.
+Renderer = Callable[[Any], Any]
 
 
 def _check_render_mode(render_mode: str | None, metadata: dict[str, Any]) -> None:
@@ -34,8 +37,10 @@ def _check_render_mode(render_mode: str | None, metadata: dict[str, Any]) -> Non
         raise ValueError(f"render_mode={render_mode!r} is invalid: None or 'rgb_array'")
 
 
-def _strip_charts(sim: Simulator) -> RendererFactory:
-    """The default renderer: strip charts of the states the task weighs, and the inputs."""
+def _renderer(renderer: Renderer | None, sim: Simulator) -> RendererFactory:
+    """The vehicle's renderer, or strip charts of the states the task weighs and the inputs."""
+    if renderer is not None:
+        return lambda: renderer(sim.model)
     weighted = tuple(n for n, q in zip(sim.model.state_names, sim.task.q, strict=True) if q > 0)
     return lambda: TimeSeriesRenderer(sim.model, weighted)
 
@@ -49,18 +54,23 @@ def _spaces(sim: Simulator) -> tuple[spaces.Box, spaces.Box]:
 class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     """A marine vehicle in waves, seen through its sensors; one boat.
 
-    Subclasses build the :class:`Simulator` and call ``super().__init__``.
+    A vehicle's environment sets :attr:`make_simulator` (its keyword arguments are the
+    environment's) and, optionally, :attr:`renderer`; :func:`vector_env` makes its vector twin.
     Actions are normalised to [-1, 1] per input and mapped linearly to the physical limits;
     larger actions are clipped (``info["action_clipped"]``), NaN or inf raises ``ValueError``.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
+    #: Builds the vehicle's :class:`Simulator` from the environment's keyword arguments.
+    make_simulator: ClassVar[Callable[..., Simulator]]
+    #: The vehicle's own renderer class (built from the model), or None for strip charts.
+    renderer: ClassVar[Renderer | None] = None
 
-    def __init__(self, sim: Simulator, render_mode: str | None = None,
-                 renderer: RendererFactory | None = None) -> None:
+    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
         _check_render_mode(render_mode, self.metadata)
+        sim = self.make_simulator(**kwargs)
         self.sim, self.render_mode = sim, render_mode
-        self._make_renderer = renderer or _strip_charts(sim)
+        self._make_renderer = _renderer(type(self).renderer, sim)
         self.metadata = {**self.metadata, "render_fps": round(1 / sim.dt)}
         self.action_space, self.observation_space = _spaces(sim)
         self.dt = sim.dt
@@ -126,7 +136,7 @@ class MarineVectorEnv(VectorEnv):
         if max_episode_steps is not None and max_episode_steps < 1:
             raise ValueError(f"max_episode_steps={max_episode_steps!r} is invalid: >= 1 or None")
         _check_render_mode(render_mode, self.metadata)
-        self._make_renderer = renderer or _strip_charts(sim)
+        self._make_renderer = renderer or _renderer(None, sim)
         self.sim, self.num_envs, self.max_episode_steps = sim, int(num_envs), max_episode_steps
         self.render_mode, self.dt = render_mode, sim.dt
         self.single_action_space, self.single_observation_space = _spaces(sim)
@@ -206,6 +216,29 @@ class MarineVectorEnv(VectorEnv):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+def vector_env(single: type[MarineEnv], max_episode_steps: int = 1000) -> type[MarineVectorEnv]:
+    """The native vector twin of the vehicle environment ``single``: ``num_envs`` boats of the
+    same simulator stepped together, with ``single``'s keyword arguments (Gymnasium's
+    ``vector_entry_point``).
+
+    :param max_episode_steps: the twin's default episode length, steps (the registered one).
+    """
+
+    def __init__(self: MarineVectorEnv, num_envs: int = 1,
+                 max_episode_steps: int | None = max_episode_steps,
+                 render_mode: str | None = None, **kwargs: Any) -> None:
+        sim = single.make_simulator(**kwargs)
+        MarineVectorEnv.__init__(self, sim, num_envs, max_episode_steps, render_mode=render_mode,
+                                 renderer=_renderer(single.renderer, sim))
+
+    name = single.__name__.removesuffix("Env") + "VectorEnv"
+    doc = (f"``num_envs`` boats of :class:`{single.__name__}` stepped together with array "
+           "operations; keyword arguments as there.")
+    return type(name, (MarineVectorEnv,), {"__init__": __init__, "__doc__": doc,
+                                           "__module__": single.__module__,
+                                           "__qualname__": name})
 
 
 def _initial_state(sim: Simulator, options: dict[str, Any] | None):

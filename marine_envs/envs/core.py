@@ -15,7 +15,8 @@ from typing import Any, Literal, TypedDict
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..models import VehicleModel, zoh
+from ..models import VehicleModel
+from ..models.integrate import ExactStep, RK4Step
 from ..sea.processes import DisturbanceSource
 from ..sensors import SensorSuite, as_index, per_channel
 
@@ -109,57 +110,6 @@ def uniform_initial_state(model: VehicleModel, spread: Mapping[str, float],
     return draw
 
 
-class ExactLinear:
-    """Exact discretisation of an affine model with inputs and disturbances held over a step:
-    ``x_next = [x u d] @ transition + offset``."""
-
-    def __init__(self, model: VehicleModel, dt: float) -> None:
-        A, B, E = model.linearize()
-        nominal = np.concatenate([model.x0, model.u0, np.zeros(E.shape[1])])
-        # the affine part: x_dot = A x + [B E] [u d] + c
-        constant = model.rhs(model.x0, model.u0) - A @ model.x0 - B @ model.u0
-        Phi, Gamma = zoh(A, np.column_stack([B, E, constant]), dt)
-        self.transition = np.hstack([Phi, Gamma[:, :-1]]).T.copy()
-        offset = Gamma[:, -1]
-        self.offset = offset if np.abs(offset).max() > 1e-12 * (1 + np.abs(nominal).max()) \
-            else None
-
-    def __call__(self, xud: FloatArray) -> FloatArray:
-        x_next = xud @ self.transition
-        return x_next if self.offset is None else x_next + self.offset
-
-
-class RK4:
-    """Classical Runge-Kutta on the model's ``rhs`` with ``substeps`` per control period."""
-
-    def __init__(self, model: VehicleModel, dt: float, substeps: int = 4) -> None:
-        self.rhs, self.h, self.substeps = model.rhs, dt / substeps, substeps
-        self.n_x, self.n_u = len(model.state_names), len(model.input_names)
-
-    def __call__(self, xud: FloatArray) -> FloatArray:
-        f, h = self.rhs, self.h
-        x, u, d = np.split(xud, [self.n_x, self.n_x + self.n_u], axis=1)
-        for i in range(self.substeps):
-            k = f(x, u, d)
-            if i == 0 and k.flags.f_contiguous and not x.flags.f_contiguous:
-                # a model working on state rows returns a transposed array: mixing memory
-                # layouts would make every update below a slow strided loop
-                x = np.asfortranarray(x)
-            total = k.copy()
-            k = f(x + 0.5 * h * k, u, d)
-            total += 2 * k
-            k = f(x + 0.5 * h * k, u, d)
-            total += 2 * k
-            k = f(x + h * k, u, d)
-            total += k
-            x = x + h / 6 * total
-        if not np.isfinite(x).all():
-            bad = int(np.flatnonzero(~np.isfinite(x).all(axis=1))[0])
-            raise FloatingPointError(f"simulation diverged: non-finite state {x[bad]} of boat "
-                                     f"{bad} (a parameter or time step out of range?)")
-        return x
-
-
 InitialState = Callable[[np.random.Generator], FloatArray]
 
 
@@ -230,8 +180,8 @@ class Simulator:
         self.model, self.sensors, self.task = model, sensors, task
         self.disturbances, self.disturbance_seed = disturbances, disturbance_seed
         self.dt, self.initial_state = dt, initial_state
-        self.integrate = ExactLinear(model, dt) if integrator == "exact" else RK4(model, dt,
-                                                                                 substeps)
+        self.integrate = ExactStep(model, dt) if integrator == "exact" else RK4Step(model, dt,
+                                                                                    substeps)
         self._outputs_are_states = model.output_names == model.state_names
         self.measured = as_index(np.array([model.output_names.index(c)
                                            for c in sensors.channels]))

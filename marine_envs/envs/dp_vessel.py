@@ -1,4 +1,5 @@
-"""DPVessel-v0: dynamic positioning of a supply vessel in waves (seed 003)."""
+"""DPVessel-v0: dynamic positioning of a supply vessel in waves (the DP wave-frequency
+patent)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import scipy.linalg
 
 from ..models.dp_vessel import DPVesselModel
 from ..sea.processes import GaussMarkov
-from .base import MarineEnv, MarineVectorEnv
+from .base import MarineEnv, vector_env
 from .core import (
     InitialState,
     SensorOptions,
@@ -22,8 +23,9 @@ from .core import (
 )
 
 DEG = math.pi / 180
-#: Position reference and gyrocompass: position sigma from seed 003's R_ident = 1e-3 m^2; the
-#: seed's 2e-2 on heading (8 deg if rad) is implausible, a gyrocompass's 0.1 deg is used [PROPOSED].
+#: Position reference and gyrocompass: position sigma from the DP wave-frequency patent's
+#: R_ident = 1e-3 m^2; the patent's 2e-2 on heading (8 deg if rad) is implausible, a gyrocompass's
+#: 0.1 deg is used [PROPOSED].
 DEFAULT_SENSORS = {"noise_std": {"north": math.sqrt(1e-3), "east": math.sqrt(1e-3),
                                  "psi": 0.1 * DEG},
                    "sensor_range": {"north": 1000.0, "east": 1000.0}}  # m, full scale
@@ -98,13 +100,14 @@ class DPVesselEnv(MarineEnv):
     """Dynamic positioning: hold a supply vessel at a set-point against current and waves.
 
     ## Description
-    The 76.2 m, 6000 t supply vessel of Fossen, Sagatun & Soerensen (1996) (MODELS.md 4) holds
-    its position and heading with its thrusters. A slowly varying bias (current, wind and
+    The 76.2 m, 6000 t supply vessel of Fossen, Sagatun & Soerensen (1996) (docs/models.md 4)
+    holds its position and heading with its thrusters. A slowly varying bias (current, wind and
     second-order wave drift; a Gauss-Markov process in the north-east frame) pushes it away; the
     first-order waves make it oscillate at wave frequency (one damped second-order filter per
     degree of freedom). The position reference and gyrocompass measure both motions plus noise
-    (seed 003): a good DP controller compensates the slow motion and leaves the wave-frequency
-    motion alone, which needs a wave filter between the sensors and the controller.
+    (the DP wave-frequency patent): a good DP controller compensates the slow motion and leaves
+    the wave-frequency motion alone, which needs a wave filter between the sensors and the
+    controller.
 
     ## Action Space
     ``Box(-1, 1, (3,), float32)``: surge force, sway force and yaw moment, normalised by the
@@ -134,10 +137,11 @@ class DPVesselEnv(MarineEnv):
     ``measurement_mask``, ``time`` (s).
 
     ## Arguments
-    * ``dt``: control period, s (0.5, seed 003's Ts).
-    * ``params``: model parameter overrides (MODELS.md 4 names), e.g. ``{"w0": [0.8, 0.8, 0.8]}``
-      (wave-frequency peaks, rad/s), ``{"sigma_b": [1e5, 1e5, 2e6]}`` (bias std, N, N, N m),
-      ``{"sigma_eta": [2, 2, 0.05]}`` (WF motion RMS, m, m, rad), ``{"T_b": [500, 500, 500]}``.
+    * ``dt``: control period, s (0.5, the DP wave-frequency patent's Ts).
+    * ``params``: model parameter overrides (docs/models.md 4 names), e.g.
+      ``{"w0": [0.8, 0.8, 0.8]}`` (wave-frequency peaks, rad/s), ``{"sigma_b": [1e5, 1e5, 2e6]}``
+      (bias std, N, N, N m), ``{"sigma_eta": [2, 2, 0.05]}`` (WF motion RMS, m, m, rad),
+      ``{"T_b": [500, 500, 500]}``.
     * ``setpoint``: ``{"north": m, "east": m, "psi": rad}`` (default the origin, heading north).
     * ``noise_std``, ``bias``, ``quantization``, ``sensor_range``, ``sample_period``, ``delay``,
       ``dropout``: per channel (``north``, ``east``, ``psi``), a number or ``{channel: value}``.
@@ -147,14 +151,7 @@ class DPVesselEnv(MarineEnv):
     * ``disturbance_seed``: if set, every episode sees the same bias and wave history.
     """
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(make_dp_simulator(**kwargs), render_mode=render_mode)
+    make_simulator = staticmethod(make_dp_simulator)
 
 
-class DPVesselVectorEnv(MarineVectorEnv):
-    """``num_envs`` DP vessels stepped together; arguments as :class:`DPVesselEnv`."""
-
-    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000,
-                 render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(make_dp_simulator(**kwargs), num_envs, max_episode_steps,
-                         render_mode=render_mode)
+DPVesselVectorEnv = vector_env(DPVesselEnv)

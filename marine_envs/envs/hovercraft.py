@@ -1,4 +1,5 @@
-"""Hovercraft-v0: course keeping of an air-cushion vehicle at cruise speed, in wind (seed 004)."""
+"""Hovercraft-v0: course keeping of an air-cushion vehicle at cruise speed, in wind (the
+hovercraft EKF paper)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..manoeuvres import ZigzagRudder
 from ..models.hovercraft import HovercraftModel
 from ..sea.processes import GaussMarkov
-from .base import MarineEnv, MarineVectorEnv
+from .base import MarineEnv, vector_env
 from .core import SensorOptions, Simulator, make_sensors, make_task, uniform_initial_state
 
 DEG = math.pi / 180
@@ -107,13 +108,13 @@ class HovercraftEnv(MarineEnv):
     """Course keeping of an LCAC-like hovercraft at cruise speed, in gusty wind.
 
     ## Description
-    A 150 t air-cushion vehicle (seed 004; the MMG-separated model of MODELS.md 5, all
-    coefficients proposed) runs at 32 kn on two air propellers with air rudders in their
-    slipstream. It has little hydrodynamic grip, so it drifts in turns and the wind pushes it
-    around: hold the commanded course (and the speed) with the propeller pitch and the rudders.
-    With ``zigzag="A/B"`` the environment instead runs the standard open-loop zig-zag manoeuvre
-    (rudder to +A, reversed whenever the heading has changed by B), the test that seed 004
-    identifies the model from.
+    A 150 t air-cushion vehicle (the hovercraft EKF paper; the MMG-separated model of
+    docs/models.md 5, all coefficients proposed) runs at 32 kn on two air propellers with air
+    rudders in their slipstream. It has little hydrodynamic grip, so it drifts in turns and the
+    wind pushes it around: hold the commanded course (and the speed) with the propeller pitch and
+    the rudders. With ``zigzag="A/B"`` the environment instead runs the standard open-loop
+    zig-zag manoeuvre (rudder to +A, reversed whenever the heading has changed by B), the test
+    that the paper identifies the model from.
 
     ## Action Space
     ``Box(-1, 1, (3,), float32)``: port and starboard propeller pitch (-0.5 ... 1, mapped
@@ -143,8 +144,8 @@ class HovercraftEnv(MarineEnv):
 
     ## Arguments
     * ``dt``: control period, s (0.1).
-    * ``params``: model overrides by MODELS.md name, e.g. ``{"u_cruise": 12.0}`` (cruise speed,
-      m/s) or ``{"N_Hr": -1e6}``.
+    * ``params``: model overrides by docs/models.md name, e.g. ``{"u_cruise": 12.0}`` (cruise
+      speed, m/s) or ``{"N_Hr": -1e6}``.
     * ``course``: commanded heading, rad (0).
     * ``wind_speed`` (5 m/s), ``wind_direction`` (where it blows from, rad clockwise from north:
       pi/4), ``wind_gust`` (std, m/s: 1) and ``wind_time_constant`` (s: 20) of the Gauss-Markov
@@ -158,14 +159,7 @@ class HovercraftEnv(MarineEnv):
     * ``disturbance_seed``: if set, every episode sees the same wind.
     """
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(make_hovercraft_simulator(**kwargs), render_mode=render_mode)
+    make_simulator = staticmethod(make_hovercraft_simulator)
 
 
-class HovercraftVectorEnv(MarineVectorEnv):
-    """``num_envs`` hovercraft stepped together; arguments as :class:`HovercraftEnv`."""
-
-    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000,
-                 render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(make_hovercraft_simulator(**kwargs), num_envs, max_episode_steps,
-                         render_mode=render_mode)
+HovercraftVectorEnv = vector_env(HovercraftEnv)

@@ -1,4 +1,5 @@
-"""Hydrofoil-v0: heave and pitch keeping of a foil-borne craft in a random sea (seed 001)."""
+"""Hydrofoil-v0: heave and pitch keeping of a foil-borne craft in a random sea (the hydrofoil
+AKF paper)."""
 
 from __future__ import annotations
 
@@ -9,20 +10,20 @@ from typing import Any, Literal, Unpack
 from ..models.base import LinearizedModel
 from ..models.hydrofoil import HydrofoilModel
 from ..sea import SeaState, WaveRealisation, wave_coupling
-from .base import MarineEnv, MarineVectorEnv
+from .base import MarineEnv, vector_env
 from .core import SensorOptions, Simulator, make_sensors, make_task, uniform_initial_state
 
 DEG = math.pi / 180
-#: Seed 001: C = I4 and measurement noise variance WR = 0.003 on every channel.
+#: The hydrofoil AKF paper: C = I4 and measurement noise variance WR = 0.003 on every channel.
 DEFAULT_SENSORS = {"noise_std": math.sqrt(0.003),
                    "sensor_range": {"xi": 5.0, "theta": math.pi / 2, "xi_dot": 5.0,
                                     "theta_dot": math.pi / 2}}  # full scales [PROPOSED]
-#: Seed 001's LQR weights Q = diag(0, 100, 0, 1000), R = I2, plus a small heave weight: with none
-#: the weakly unstable heave drifts to broaching within minutes; larger ones feed the 5.5 cm heave
-#: noise into the foils.
+#: The hydrofoil AKF paper's LQR weights Q = diag(0, 100, 0, 1000), R = I2, plus a small heave
+#: weight: with none the weakly unstable heave drifts to broaching within minutes; larger ones feed
+#: the 5.5 cm heave noise into the foils.
 DEFAULT_STATE_WEIGHTS = {"xi": 0.1, "theta": 100.0, "theta_dot": 1000.0}
 DEFAULT_INPUT_WEIGHTS = {"alpha_s1": 1.0, "alpha_s2": 1.0}
-#: MODELS.md 2.5 [PROPOSED]: Hs (m) rising from 0.10 to 0.30 and falling to 0.15 over 600 s.
+#: docs/models.md 2.5 [PROPOSED]: Hs (m) rising from 0.10 to 0.30 and falling to 0.15 over 600 s.
 DEFAULT_HS_SCHEDULE = ((0.0, 0.10), (100.0, 0.10), (200.0, 0.30), (350.0, 0.30), (450.0, 0.15),
                        (600.0, 0.15))
 EPISODE_STEPS = 12000  #: 600 s at the default 0.05 s: the whole schedule
@@ -75,12 +76,12 @@ class HydrofoilEnv(MarineEnv):
     """Heave and pitch keeping of a fully submerged two-foil craft, in a random sea.
 
     ## Description
-    A 102 kg unmanned hydrofoil (seed 001; the quasi-steady two-foil model of MODELS.md 2) flies
-    at 6.08 m/s with its hull 1.04 m above the water, carried by a front and a rear foil 2 m down
-    on struts. Their angles are the controls. The waves' orbital velocities change the foils'
-    angles of attack; heave is weakly unstable (a slow +0.17 1/s pole), so the craft must be
-    flown. The sea is Pierson-Moskowitz with a significant wave height that changes over the
-    episode, met at 120 deg (bow-quartering).
+    A 102 kg unmanned hydrofoil (the hydrofoil AKF paper; the quasi-steady two-foil model of
+    docs/models.md 2) flies at 6.08 m/s with its hull 1.04 m above the water, carried by a front
+    and a rear foil 2 m down on struts. Their angles are the controls. The waves' orbital
+    velocities change the foils' angles of attack; heave is weakly unstable (a slow +0.17 1/s
+    pole), so the craft must be flown. The sea is Pierson-Moskowitz with a significant wave
+    height that changes over the episode, met at 120 deg (bow-quartering).
 
     ## Action Space
     ``Box(-1, 1, (2,), float32)``: front and rear foil angles over +-15 deg (trim 2.37 and
@@ -88,14 +89,15 @@ class HydrofoilEnv(MarineEnv):
 
     ## Observation Space
     ``Box((4,), float32)``: ``[xi, theta, xi_dot, theta_dot]`` (m, down positive; rad; m/s;
-    rad/s), C = I4, with seed 001's measurement noise of variance 0.003 on each channel (std
-    0.055: 3.1 deg on pitch, which dominates the pitch error of any filter-free controller).
+    rad/s), C = I4, with the hydrofoil AKF paper's measurement noise of variance 0.003 on each
+    channel (std 0.055: 3.1 deg on pitch, which dominates the pitch error of any filter-free
+    controller).
 
     ## Rewards
     Minus the LQR stage cost: Q = diag(0.1, 100, 0, 1000) on the deviation from trim and R = I2
-    on the foil angles' deviation from trim (rad): seed 001's weights plus a small heave weight,
-    without which heave (weakly unstable) drifts to broaching; pass
-    ``state_weights={"theta": 100, "theta_dot": 1000}`` for the seed's own.
+    on the foil angles' deviation from trim (rad): the hydrofoil AKF paper's weights plus a small
+    heave weight, without which heave (weakly unstable) drifts to broaching; pass
+    ``state_weights={"theta": 100, "theta_dot": 1000}`` for the paper's own.
 
     ## Starting State
     Trim (xi = -1.04 m, theta = 2 deg) with heave +-0.05 m and pitch +-1 deg; or
@@ -114,15 +116,17 @@ class HydrofoilEnv(MarineEnv):
 
     ## Arguments
     * ``dt``: control period, s (0.05).
-    * ``params``: model overrides by MODELS.md name, e.g. ``{"lift_slope": "helmbold"}``,
+    * ``params``: model overrides by docs/models.md name, e.g. ``{"lift_slope": "helmbold"}``,
       ``{"added_mass": True}``, ``{"U": 7.0}``.
-    * ``model``: ``"nonlinear"`` (MODELS.md 2.3, RK4) or ``"linear"`` (its linearisation at trim,
-      MODELS.md 2.4, stepped exactly).
-    * ``hs``: significant wave height, m, or ``(t, hs)`` points of a schedule (default: MODELS.md
-      2.5's 600 s schedule 0.10 -> 0.30 -> 0.15 m); ``tp``: peak period, s (None: one-parameter PM).
+    * ``model``: ``"nonlinear"`` (docs/models.md 2.3, RK4) or ``"linear"`` (its linearisation at
+      trim, docs/models.md 2.4, stepped exactly).
+    * ``hs``: significant wave height, m, or ``(t, hs)`` points of a schedule (default: the 600 s
+      schedule 0.10 -> 0.30 -> 0.15 m of docs/models.md 2.5); ``tp``: peak period, s (None:
+      one-parameter PM).
     * ``wave_heading``: encounter angle, rad (120 deg); ``n_wave_components`` (100);
       ``waves`` (True; False = calm water); ``rich_waves``: also the surface elevation and the
-      horizontal orbital velocity (MODELS.md's "richer truth model"; default False: the seed's).
+      horizontal orbital velocity (the "richer truth model" of docs/models.md 2.4; default False:
+      the paper's).
     * ``noise_std``, ``bias``, ``quantization``, ``sensor_range``, ``sample_period``, ``delay``,
       ``dropout``: per channel, a number or ``{channel: value}``.
     * ``initial_spread``: ``{state: half-width}``; ``state_weights``, ``input_weights``.
@@ -130,14 +134,7 @@ class HydrofoilEnv(MarineEnv):
     * ``disturbance_seed``: if set, every episode sees the same sea.
     """
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(make_hydrofoil_simulator(**kwargs), render_mode=render_mode)
+    make_simulator = staticmethod(make_hydrofoil_simulator)
 
 
-class HydrofoilVectorEnv(MarineVectorEnv):
-    """``num_envs`` hydrofoils stepped together; arguments as :class:`HydrofoilEnv`."""
-
-    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = EPISODE_STEPS,
-                 render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(make_hydrofoil_simulator(**kwargs), num_envs, max_episode_steps,
-                         render_mode=render_mode)
+HydrofoilVectorEnv = vector_env(HydrofoilEnv, EPISODE_STEPS)

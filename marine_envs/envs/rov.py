@@ -1,16 +1,17 @@
-"""ROV-v0: velocity, depth and heading keeping of a morphing underwater robot (seed 002)."""
+"""ROV-v0: velocity, depth and heading keeping of a morphing underwater robot (the
+morphing-robot patent)."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any, Literal, Unpack
+from typing import Literal, Unpack
 
 import numpy as np
 
 from ..models.rov import THRUSTER_ALLOCATION, THRUSTER_LIMITS, ROVModel
 from ..sea.processes import GaussMarkov, Stacked, StepEvent
-from .base import MarineEnv, MarineVectorEnv
+from .base import MarineEnv, vector_env
 from .core import (
     Actuation,
     SensorOptions,
@@ -23,7 +24,7 @@ from .core import (
 DEG = math.pi / 180
 CHANNELS = ("u", "v", "w", "phi", "theta", "psi", "p", "q", "r", "z")
 #: DVL (u, v, w), fibre-optic gyro (attitude and rates) and depth cell; noise [PROPOSED in
-#: MODELS.md 3.5, depth 2 cm]; the DVL pings at 5 Hz, the others every control step (10 Hz).
+#: docs/models.md 3.5, depth 2 cm]; the DVL pings at 5 Hz, the others every control step (10 Hz).
 DEFAULT_SENSORS = {
     "noise_std": {"u": 0.01, "v": 0.01, "w": 0.01, "phi": 0.05 * DEG, "theta": 0.05 * DEG,
                   "psi": 0.05 * DEG, "p": 0.01 * DEG, "q": 0.01 * DEG, "r": 0.01 * DEG,
@@ -93,12 +94,12 @@ class ROVEnv(MarineEnv):
     """Velocity, depth and heading keeping of a morphing underwater robot, in a current.
 
     ## Description
-    A REMUS-100-sized robot (seed 002; Prestero's 6-DOF model with six tunnel and stern
-    thrusters, MODELS.md 3) cruises at a commanded body velocity, depth and heading through a
-    slowly varying ocean current. Once per episode it morphs from the streamlined cruise shape to
-    the work shape (manipulator deployed at the bow): axial drag grows ninefold, roll drag a
-    hundred-and-sixtyfold, yaw and pitch crossflow moments change sign or triple, and the centre
-    of gravity moves forward, so a controller tuned for cruise meets different physics.
+    A REMUS-100-sized robot (the morphing-robot patent; Prestero's 6-DOF model with six tunnel
+    and stern thrusters, docs/models.md 3) cruises at a commanded body velocity, depth and heading
+    through a slowly varying ocean current. Once per episode it morphs from the streamlined
+    cruise shape to the work shape (manipulator deployed at the bow): axial drag grows ninefold,
+    roll drag a hundred-and-sixtyfold, yaw and pitch crossflow moments change sign or triple, and
+    the centre of gravity moves forward, so a controller tuned for cruise meets different physics.
 
     ## Action Space
     ``Box(-1, 1, (6,), float32)``. With ``actuation="forces"`` (default): generalised forces
@@ -133,7 +134,7 @@ class ROVEnv(MarineEnv):
 
     ## Arguments
     * ``dt``: control period, s (0.1).
-    * ``params``: model overrides by MODELS.md name (cruise values, e.g. ``{"Xuu": -2.0}``;
+    * ``params``: model overrides by docs/models.md name (cruise values, e.g. ``{"Xuu": -2.0}``;
       ``work_<name>`` for the work shape; ``T_m``, the morph time constant, s).
     * ``actuation``: ``"forces"`` or ``"thrusters"``.
     * ``reference``: offsets from the nominal cruise state by state name, e.g.
@@ -151,14 +152,7 @@ class ROVEnv(MarineEnv):
     * ``disturbance_seed``: if set, every episode sees the same current and morph time.
     """
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(make_rov_simulator(**kwargs), render_mode=render_mode)
+    make_simulator = staticmethod(make_rov_simulator)
 
 
-class ROVVectorEnv(MarineVectorEnv):
-    """``num_envs`` ROVs stepped together; arguments as :class:`ROVEnv`."""
-
-    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000,
-                 render_mode: str | None = None, **kwargs: Any) -> None:
-        super().__init__(make_rov_simulator(**kwargs), num_envs, max_episode_steps,
-                         render_mode=render_mode)
+ROVVectorEnv = vector_env(ROVEnv)

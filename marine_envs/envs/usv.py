@@ -1,14 +1,15 @@
-"""USV-v0: rudder-roll-yaw course keeping with roll damping in waves (seed 000)."""
+"""USV-v0: rudder-roll-yaw course keeping with roll damping in waves (the USV observer
+patent)."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from typing import Any, Literal, Unpack
+from typing import Literal, Unpack
 
 from ..models import USVModel
 from ..sea import MeasuredSpectrum, SeaState, WaveRealisation, wave_coupling
-from .base import MarineEnv, MarineVectorEnv
+from .base import MarineEnv, vector_env
 from .core import SensorOptions, Simulator, make_sensors, make_task, uniform_initial_state
 from .rendering import USVRenderer
 
@@ -71,17 +72,17 @@ class USVEnv(MarineEnv):
     """Rudder-roll-yaw course keeping with roll damping, in waves.
 
     ## Description
-    An unmanned surface vessel (seed 000; the Van Amerongen rudder-roll model of MODELS.md 1)
-    holds its course in a random sea using its rudder only, while damping the roll the waves
-    excite. The rudder turns the ship and, through the sway it induces, rolls it: the classic
-    rudder-roll-stabilisation trade-off. The sway speed is not measured.
+    An unmanned surface vessel (the USV observer patent; the Van Amerongen rudder-roll model of
+    docs/models.md 1) holds its course in a random sea using its rudder only, while damping the
+    roll the waves excite. The rudder turns the ship and, through the sway it induces, rolls it:
+    the classic rudder-roll-stabilisation trade-off. The sway speed is not measured.
 
     ## Action Space
     ``Box(-1, 1, (1,), float32)``: rudder angle normalised by the rudder limit (35 deg).
     Out-of-range actions are clipped and flagged in ``info["action_clipped"]``; NaN/inf raise.
 
     ## Observation Space
-    ``Box((4,), float32)``: the seed's measured channels ``[r, psi, p, phi]`` (rad/s, rad,
+    ``Box((4,), float32)``: the patent's measured channels ``[r, psi, p, phi]`` (rad/s, rad,
     rad/s, rad) after bias, Gaussian noise, heading wrapping to (-pi, pi], quantization, sensor
     full scale (90 deg/s gyros, 90 deg inclinometer), delay and dropout, as configured. Default
     noise std 0.1 deg/s, 0.2 deg, 0.1 deg/s, 0.1 deg; default quantization steps 0.05 deg/s,
@@ -107,7 +108,7 @@ class USVEnv(MarineEnv):
 
     ## Arguments
     * ``dt``: control period, s (0.1).
-    * ``params``: model parameter overrides by MODELS.md symbol, e.g. ``{"wn": 0.7}``.
+    * ``params``: model parameter overrides by docs/models.md symbol, e.g. ``{"wn": 0.7}``.
     * ``hs``: significant wave height, m (2.0), a list of ``(t, hs)`` points for a schedule, or
       None with a measured spectrum; ``tp``: peak period, s (8.0; None = one-parameter PM);
       ``spectrum``: "pm", "jonswap" or a ``MeasuredSpectrum``; ``gamma``: JONSWAP gamma.
@@ -119,7 +120,7 @@ class USVEnv(MarineEnv):
       ``sample_period`` (control steps per sample), ``delay`` (samples), ``dropout``
       (probability):
       a number for every channel or ``{channel: value}``, SI units; ``quantizer``: "static" or
-      "zooming" (seed 000's relative law, rate ``zoom_k``).
+      "zooming" (the USV observer patent's relative law, rate ``zoom_k``).
     * ``initial_spread``: ``{state: half-width}`` of the uniform initial state.
     * ``state_weights``, ``input_weights``: ``{name: weight}`` of the task cost.
     * ``max_roll``: roll angle that ends the episode, rad.
@@ -127,16 +128,8 @@ class USVEnv(MarineEnv):
     * ``render_mode``: None or "rgb_array" (heading, roll and rudder drawn; works with RecordVideo).
     """
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
-        sim = make_usv_simulator(**kwargs)
-        super().__init__(sim, render_mode=render_mode, renderer=lambda: USVRenderer(sim.model))
+    make_simulator = staticmethod(make_usv_simulator)
+    renderer = USVRenderer
 
 
-class USVVectorEnv(MarineVectorEnv):
-    """``num_envs`` USVs stepped together with array operations; arguments as :class:`USVEnv`."""
-
-    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = 1000,
-                 render_mode: str | None = None, **kwargs: Any) -> None:
-        sim = make_usv_simulator(**kwargs)
-        super().__init__(sim, num_envs, max_episode_steps, render_mode=render_mode,
-                         renderer=lambda: USVRenderer(sim.model))
+USVVectorEnv = vector_env(USVEnv)

@@ -1,7 +1,12 @@
-"""Vehicle models: pure physics, no Gymnasium (ARCHITECTURE.md contract 1).
+"""Vehicle models: pure physics, no Gymnasium (docs/architecture.md contract 1).
+
+One module per vehicle holds its equations; the numerics every model and every layer shares are
+written once beside them: :mod:`.integrate` (RK4, sub-steps, the exact step of a linear model),
+:mod:`.linear` (ZOH discretisation, LQR / Riccati designs), :mod:`.kinematics` (rotations), and
+:mod:`.effects`, the catalogue of physics a model may leave out.
 
 >>> from marine_envs.models import get_model
->>> usv = get_model("usv", wn=0.7)      # parameter overrides by MODELS.md symbol
+>>> usv = get_model("usv", wn=0.7)      # parameter overrides by docs/models.md symbol
 >>> A, B, E = usv.linearize()
 """
 
@@ -9,7 +14,8 @@ from __future__ import annotations
 
 import importlib
 
-from .base import VehicleModel, zoh
+from .base import VehicleModel
+from .linear import zoh
 from .usv import USVModel, USVParams
 
 #: Model name -> "module:class"; modules are imported on first use.

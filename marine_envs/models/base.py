@@ -1,4 +1,4 @@
-"""The vehicle-model protocol shared by every vehicle (ARCHITECTURE.md, contract 1).
+"""The vehicle-model protocol shared by every vehicle (docs/architecture.md, contract 1).
 
 A model is pure physics: continuous-time dynamics ``x_dot = rhs(x, u, d)`` in SI units and
 radians, vectorised over any leading batch axes, and its linearisation. It knows nothing about
@@ -14,7 +14,6 @@ from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 FloatArray = NDArray[np.float64]
@@ -185,7 +184,8 @@ class VehicleModel(ABC):
 
     # -- variants ------------------------------------------------------------------------------
     def with_params(self, **changes: float) -> VehicleModel:
-        """A copy of this model with some parameters replaced (validated, names as in MODELS.md)."""
+        """A copy of this model with some parameters replaced (validated; names as in
+        docs/models.md)."""
         unknown = set(changes) - {f.name for f in dataclasses.fields(self.params)}
         if unknown:
             known = ", ".join(f.name for f in dataclasses.fields(self.params))
@@ -207,17 +207,6 @@ class VehicleModel(ABC):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.params!r})"
-
-
-def zoh(A: ArrayLike, B: ArrayLike, dt: float) -> tuple[FloatArray, FloatArray]:
-    """Zero-order-hold discretisation ``(Phi, Gamma)`` of ``x_dot = A x + B w`` over ``dt`` s:
-    ``Phi = exp(A dt)``, ``Gamma = int_0^dt exp(A s) ds B``, exact for ``w`` held over the step."""
-    A, B = np.atleast_2d(np.asarray(A, dtype=float)), np.atleast_2d(np.asarray(B, dtype=float))
-    n, m = B.shape
-    block = np.zeros((n + m, n + m))
-    block[:n, :n], block[:n, n:] = A, B
-    phi = scipy.linalg.expm(block * dt)
-    return phi[:n, :n], phi[:n, n:]
 
 
 class LinearizedModel(VehicleModel):

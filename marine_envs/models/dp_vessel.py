@@ -1,5 +1,5 @@
-"""DP supply vessel: 3-DOF low-frequency model with bias and wave-frequency motion (seed 003;
-MODELS.md section 4).
+"""DP supply vessel: 3-DOF low-frequency model with bias and wave-frequency motion (the DP
+wave-frequency patent; docs/models.md section 4).
 
 Low-frequency (LF) model of the L = 76.2 m supply vessel of Fossen, Sagatun & Soerensen (1996),
 with a first-order Gauss-Markov bias in NED and one second-order wave-frequency (WF) filter per
@@ -24,15 +24,15 @@ Inputs are the thruster forces and moment ``tau = [X, Y, N]`` (N, N, N m). The s
 (unit 1/sqrt(s)); a simulator holding them over a step ``dt`` draws them with std 1/sqrt(dt).
 
 Outputs (:meth:`DPVesselModel.output`) are the states plus what the position reference and the
-gyrocompass measure, seed 003's "LF + WF motion": ``north = north_lf + eta_w_north``,
-``east = east_lf + eta_w_east``, ``psi = psi_lf + eta_w_psi``.
+gyrocompass measure, the DP wave-frequency patent's "LF + WF motion":
+``north = north_lf + eta_w_north``, ``east = east_lf + eta_w_east``, ``psi = psi_lf + eta_w_psi``.
 
 The WF gain is set from a target RMS of the WF motion, ``K_w = sqrt(4 lambda w0) sigma_eta``
 (unit-intensity noise gives variance K_w^2 / (4 lambda w0)); the bias gain from a stationary bias
-std, ``E_b = sigma_b sqrt(2 / T_b)`` (variance E_b^2 T_b / 2). ``T_b = inf`` gives MODELS.md's
-``T_b^-1 = 0`` alternative with ``E_b = 0``: a constant bias set by the initial state. A driven
-random walk of intensity q is approximated, over any finite episode, by a long ``T_b`` with
-``sigma_b = q sqrt(T_b / 2)``.
+std, ``E_b = sigma_b sqrt(2 / T_b)`` (variance E_b^2 T_b / 2). ``T_b = inf`` gives the
+``T_b^-1 = 0`` alternative of docs/models.md 4.1 with ``E_b = 0``: a constant bias set by the
+initial state. A driven random walk of intensity q is approximated, over any finite episode, by
+a long ``T_b`` with ``sigma_b = q sqrt(T_b / 2)``.
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .base import FloatArray, VehicleModel, require
+from .kinematics import planar_to_body, planar_to_ned
 
 Vec3 = tuple[float, float, float]
 Mat3 = tuple[Vec3, Vec3, Vec3]
@@ -52,7 +53,7 @@ Mat3 = tuple[Vec3, Vec3, Vec3]
 
 def wf_matrices(w0: ArrayLike, lambda_: ArrayLike, K_w: ArrayLike
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """WF model matrices ``(A_w (6, 6), E_w (6, 3), C_w (3, 6))`` of MODELS.md 4.2.
+    """WF model matrices ``(A_w (6, 6), E_w (6, 3), C_w (3, 6))`` of docs/models.md 4.2.
 
     Block order: the three "position-like" states xi_1, then the three WF motions xi_2 = eta_w.
     A free function so that estimators can build them for an estimated ``w0``.
@@ -95,10 +96,12 @@ def _as_mat3(value, name: str) -> Mat3:
 
 @dataclasses.dataclass(frozen=True)
 class DPVesselParams:
-    """Parameters of the DP supply-vessel model; names are MODELS.md's symbols. SI units, radians.
+    """Parameters of the DP supply-vessel model; names are docs/models.md's symbols. SI units,
+    radians.
 
     Triples are ordered (north or surge, east or sway, yaw); lists are accepted and stored as
-    tuples (so JSON-loaded overrides work). ``lambda_`` is MODELS.md's lambda (a Python keyword).
+    tuples (so JSON-loaded overrides work). ``lambda_`` is docs/models.md's lambda (a Python
+    keyword).
     """
 
     L: float = 76.2  #: length between perpendiculars, m  [CITED: MSS supply.m]
@@ -108,14 +111,14 @@ class DPVesselParams:
     Mbis: Mat3 = ((1.1274, 0.0, 0.0), (0.0, 1.8902, -0.0744), (0.0, -0.0744, 0.1278))
     #: non-dimensional (Bis) linear damping matrix, -  [CITED: MSS supply.m]
     Dbis: Mat3 = ((0.0358, 0.0, 0.0), (0.0, 0.1183, -0.0124), (0.0, -0.0041, 0.0308))
-    #: bias time constants, s; inf means T_b^-1 = 0 (constant bias)  [RECALLED: MODELS.md 4.1]
+    #: bias time constants, s; inf means T_b^-1 = 0 (constant bias)  [RECALLED: docs/models.md 4.1]
     T_b: Vec3 = (1000.0, 1000.0, 1000.0)
     #: stationary bias std, N, N, N m  [PROPOSED: 50 kN ~ beam wind of 15 m/s on ~600 m^2 of
     #: windage plus current and wave drift in moderate weather; the yaw moment takes a 20 m lever]
     sigma_b: Vec3 = (5.0e4, 5.0e4, 1.0e6)
     w0: Vec3 = (1.2, 1.0, 1.05)  #: WF peak frequencies, rad/s  [SEED]
     lambda_: Vec3 = (0.1, 0.1, 0.1)  #: WF relative damping lambda, -  [SEED]
-    #: RMS of the WF motion, m, m, rad  [PROPOSED: MODELS.md 4.2, 1 m, 1 m, 2 deg]
+    #: RMS of the WF motion, m, m, rad  [PROPOSED: docs/models.md 4.2, 1 m, 1 m, 2 deg]
     sigma_eta: Vec3 = (1.0, 1.0, math.radians(2.0))
     #: thrust limits |X|, |Y|, |N|, N, N, N m  [PROPOSED: see DPVesselModel.u_bounds]
     tau_max: Vec3 = (6.0e5, 4.0e5, 1.5e7)
@@ -151,7 +154,7 @@ class DPVesselParams:
         require(all(0 < v < 1 for v in self.lambda_), "lambda_", self.lambda_,
                 "must be in (0, 1)")
 
-    # -- derived matrices (MODELS.md 4.1, 4.2) -------------------------------------------------
+    # -- derived matrices (docs/models.md 4.1, 4.2) --------------------------------------------
     @property
     def M(self) -> FloatArray:
         """Mass matrix incl. added mass, ``m Tinv Mbis Tinv`` (kg, kg, kg m, kg m^2)."""
@@ -191,7 +194,8 @@ class DPVesselParams:
 
 
 class DPVesselModel(VehicleModel):
-    """Dynamically positioned supply vessel (seed 003): LF + bias + WF model, 15 states."""
+    """Dynamically positioned supply vessel (the DP wave-frequency patent): LF + bias + WF model,
+    15 states."""
 
     name: ClassVar[str] = "dp_vessel"
     state_names: ClassVar[tuple[str, ...]] = (
@@ -205,7 +209,8 @@ class DPVesselModel(VehicleModel):
         "m s", "m s", "rad s", "m", "m", "rad")
     input_units: ClassVar[tuple[str, ...]] = ("N", "N", "N m")
     disturbance_units: ClassVar[tuple[str, ...]] = ("1/sqrt(s)",) * 6
-    #: Seed 003's measured channels: position reference and gyrocompass see LF + WF motion.
+    #: The DP wave-frequency patent's measured channels: position reference and gyrocompass see
+    #: LF + WF motion.
     measured_names: ClassVar[tuple[str, ...]] = ("north", "east", "psi")
     is_linear: ClassVar[bool] = False  # R(psi)
 
@@ -245,12 +250,11 @@ class DPVesselModel(VehicleModel):
         nu = x[..., 3:6]
         b_n, b_e = x[..., 6], x[..., 7]
         out = np.empty(shape)
-        out[..., 0] = c * nu[..., 0] - s * nu[..., 1]  # eta_dot = R(psi) nu
-        out[..., 1] = s * nu[..., 0] + c * nu[..., 1]
+        out[..., 0], out[..., 1] = planar_to_ned(c, s, nu[..., 0], nu[..., 1])  # R(psi) nu
         out[..., 2] = nu[..., 2]
         # M nu_dot = tau + R(psi)^T b - D nu
-        force = np.stack(np.broadcast_arrays(u[..., 0] + c * b_n + s * b_e,
-                                             u[..., 1] - s * b_n + c * b_e,
+        bias_x, bias_y = planar_to_body(c, s, b_n, b_e)
+        force = np.stack(np.broadcast_arrays(u[..., 0] + bias_x, u[..., 1] + bias_y,
                                              u[..., 2] + x[..., 8]), axis=-1)
         out[..., 3:6] = force @ self._Minv.T - nu @ self._MinvD.T
         out[..., 6:9] = -self._inv_Tb * x[..., 6:9] + self._E_b * d[..., :3]

@@ -1,11 +1,12 @@
-"""Hovercraft: LCAC-like 3-DOF MMG-separated manoeuvring model (seed 004; MODELS.md section 5).
+"""Hovercraft: LCAC-like 3-DOF MMG-separated manoeuvring model (the hovercraft EKF paper;
+docs/models.md section 5).
 
-``x = [u, v, r, north, east, psi]`` (m/s, m/s, rad/s, m, m, rad) = MODELS.md's
+``x = [u, v, r, north, east, psi]`` (m/s, m/s, rad/s, m, m, rad) = docs/models.md's
 ``[u, v, r, X_N, Y_E, psi]``; ``u = [sigma_1, sigma_2, delta]`` (-, -, rad): port and starboard
 propeller pitch fractions in [-0.5, 1] and the air-rudder angle, ``|delta| <= 30 deg``;
 ``d = [wind_north, wind_east]`` (m/s): the wind velocity in NED, i.e. the direction the air moves
-TO (a wind "from the north" has ``wind_north < 0``). Equations (MODELS.md 5.2, with its corrections
-u|u|, v|v|, |delta| and the symmetric added mass Y_rd = N_vd)::
+TO (a wind "from the north" has ``wind_north < 0``). Equations (docs/models.md 5.2, with its
+corrections u|u|, v|v|, |delta| and the symmetric added mass Y_rd = N_vd)::
 
     (m - X_ud) u_dot                 = X_A + X_H + X_P + X_R + m v r
     (m - Y_vd) v_dot - Y_rd r_dot    = Y_A + Y_H + Y_R - m u r
@@ -25,15 +26,16 @@ u|u|, v|v|, |delta| and the symmetric added mass Y_rd = N_vd)::
     X_R = -n_R (C_R1 + C_R2|delta| + C_R3 delta^2) S_R q_R
     Y_R = -n_R C_R4 delta S_R q_R,  N_R = x_R Y_R
 
-Wind (an extension MODELS.md leaves open; the choices are documented here). The air-relative body
-velocities are ``u_a = u - (Vn cos psi + Ve sin psi)`` and ``v_a = v - (-Vn sin psi + Ve cos psi)``.
-The aerodynamic hull terms use them, and so do the air-propeller thrust factor ``(1 - u_a/U_T)``
-and the air-rudder inflow ``V_R``: propellers and rudders work in air. The yaw-rate terms of N_A
-keep ``r`` (the wind is uniform). The hydrodynamic (skirt/cushion) terms use the water-relative
-``u, v`` (no current in this model). With zero wind ``u_a = u`` and the equations are MODELS.md's.
+Wind (an extension docs/models.md leaves open; the choices are documented here). The air-relative
+body velocities are ``u_a = u - (Vn cos psi + Ve sin psi)`` and
+``v_a = v - (-Vn sin psi + Ve cos psi)``. The aerodynamic hull terms use them, and so do the
+air-propeller thrust factor ``(1 - u_a/U_T)`` and the air-rudder inflow ``V_R``: propellers and
+rudders work in air. The yaw-rate terms of N_A keep ``r`` (the wind is uniform). The hydrodynamic
+(skirt/cushion) terms use the water-relative ``u, v`` (no current in this model). With zero wind
+``u_a = u`` and the equations are those of docs/models.md 5.2.
 
-Every coefficient is [PROPOSED] (MODELS.md 5.3): no numeric LCAC coefficient is public. Only the
-mass scale (~150 t) and the rudder count n_R = 3 come from the seed [SEED].
+Every coefficient is [PROPOSED] (docs/models.md 5.3): no numeric LCAC coefficient is public. Only
+the mass scale (~150 t) and the rudder count n_R = 3 come from the hovercraft EKF paper [SEED].
 """
 
 from __future__ import annotations
@@ -47,6 +49,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .base import FloatArray, VehicleModel, require
+from .kinematics import planar_to_body, planar_to_ned
 
 KNOT = 1852.0 / 3600.0  #: m/s per knot
 
@@ -57,7 +60,8 @@ _DERIVED = ("Iz", "X_ud", "Y_vd", "N_rd", "N_vd")
 
 @dataclasses.dataclass(frozen=True)
 class HovercraftParams:
-    """Parameters of the hovercraft model; names are MODELS.md 5.3's symbols. SI units, radians.
+    """Parameters of the hovercraft model; names are docs/models.md 5.3's symbols. SI units,
+    radians.
 
     Derived defaults: ``Iz``, ``X_ud``, ``Y_vd``, ``N_rd`` and ``N_vd`` default to ``None``,
     meaning "derived from the mass and size": ``Iz = m (L^2 + B^2)/12``, ``X_ud = -0.02 m``,
@@ -110,7 +114,8 @@ class HovercraftParams:
     sigma_min: float = -0.5  #: lowest pitch fraction (reverse), -  [PROPOSED]
     sigma_max: float = 1.0  #: highest pitch fraction, -  [PROPOSED]
     # air rudders in the slipstream
-    n_R: float = 3.0  #: number of rudders (the seed's factor "-3(...)"), -  [SEED, interpreted]
+    #: number of rudders (the hovercraft EKF paper's factor "-3(...)"), -  [SEED, interpreted]
+    n_R: float = 3.0
     S_R: float = 4.0  #: area of one rudder, m^2  [PROPOSED]
     x_R: float = -12.0  #: rudder position aft of the CG (negative), m  [PROPOSED]
     k_s: float = 0.5  #: fraction of the slipstream dynamic pressure on the rudders, -  [PROPOSED]
@@ -165,7 +170,8 @@ class HovercraftParams:
 
 
 class HovercraftModel(VehicleModel):
-    """LCAC-like air-cushion vehicle, 3-DOF MMG-separated model (seed 004, MODELS.md 5).
+    """LCAC-like air-cushion vehicle, 3-DOF MMG-separated model (the hovercraft EKF paper,
+    docs/models.md 5).
 
     The nominal point is straight running at ``u_cruise`` (32 kn) with both pitches at the trim
     value :meth:`trim_pitch` and the rudder amidships.
@@ -255,7 +261,7 @@ class HovercraftModel(VehicleModel):
 
     # -- dynamics ------------------------------------------------------------------------------
     def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
-        """``x_dot`` (m/s^2, m/s^2, rad/s^2, m/s, m/s, rad/s) of MODELS.md 5.2; see the module
+        """``x_dot`` (m/s^2, m/s^2, rad/s^2, m/s, m/s, rad/s) of docs/models.md 5.2; see the module
         docstring. Inputs are not clipped here: the environment applies :attr:`u_bounds`."""
         wind = d is not None
         x, u, d = self._split(x, u, d)
@@ -266,8 +272,8 @@ class HovercraftModel(VehicleModel):
         c, s = np.cos(psi), np.sin(psi)
         if wind:
             wind_n, wind_e = np.moveaxis(d, -1, 0)
-            ua = vel_u - (wind_n * c + wind_e * s)
-            va = vel_v - (wind_e * c - wind_n * s)
+            wind_u, wind_v = planar_to_body(c, s, wind_n, wind_e)
+            ua, va = vel_u - wind_u, vel_v - wind_v
             x_force, y_force, n_moment = self._polynomials(self._hydro, vel_u, vel_v, r)
             x_air, y_air, n_air = self._polynomials(self._aero, ua, va, r)
             x_force, y_force, n_moment = x_force + x_air, y_force + y_air, n_moment + n_air
@@ -293,8 +299,7 @@ class HovercraftModel(VehicleModel):
         out[..., 0] = x_force * self._inv_m11
         out[..., 1] = i22 * y_force + i23 * n_moment
         out[..., 2] = i32 * y_force + i33 * n_moment
-        out[..., 3] = vel_u * c - vel_v * s
-        out[..., 4] = vel_u * s + vel_v * c
+        out[..., 3], out[..., 4] = planar_to_ned(c, s, vel_u, vel_v)
         out[..., 5] = r
         return out
 

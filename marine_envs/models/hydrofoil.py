@@ -1,6 +1,6 @@
-"""Hydrofoil: longitudinal heave/pitch of a small fully-submerged two-foil craft (seed 001;
-MODELS.md section 2). Everything below is **[RECON]**: a first-principles quasi-steady foil
-model built from the seed's table, with a few **[PROPOSED]** constants.
+"""Hydrofoil: longitudinal heave/pitch of a small fully-submerged two-foil craft (the hydrofoil
+AKF paper; docs/models.md section 2). Everything below is **[RECON]**: a first-principles
+quasi-steady foil model built from the paper's table, with a few **[PROPOSED]** constants.
 
 Geometry (earth frame x forward, z down, origin on the calm surface): ``xi`` is the depth of the
 CG (positive down, so the trim ``xi0 = -1.04 m`` puts the CG above the water), ``theta`` is the
@@ -29,16 +29,17 @@ lifting line ``2 pi AR/(AR + 2)`` (default) or Helmbold's ``2 pi AR/(2 + sqrt(AR
 trim; ``u = [alpha_s1, alpha_s2]`` (rad), the absolute foil rotation angles;
 ``d = [zeta_dot_1, zeta_dot_2, eta_1, eta_2, u_w1, u_w2]`` (m/s, m/s, m, m, m/s, m/s): the upward
 sub-surface orbital velocity at each foil, the surface elevation above each foil (positive up)
-and the horizontal orbital velocity along +x at each foil (MODELS.md 2.3-2.4). The seed's model
-uses only the ``zeta_dot`` channels; ``eta`` and ``u_w`` belong to the richer truth model.
+and the horizontal orbital velocity along +x at each foil (docs/models.md 2.3-2.4). The hydrofoil
+AKF paper's model uses only the ``zeta_dot`` channels; ``eta`` and ``u_w`` belong to the richer
+truth model.
 
 Options: ``added_mass=True`` adds the heave added mass of each foil,
 ``rho*pi*(c/2)^2*b*AR/(1 + AR)`` **[PROPOSED formula]** (19.7 kg front, 4.0 kg rear), acting at
 the foil on its vertical acceleration ``xi_ddot - x_i*theta_ddot``; this couples the heave and
 pitch inertia through a constant 2x2 mass matrix (wave-induced added-mass forces are not
-modelled). Left out, as MODELS.md 2.6 lists: the lift-below-CG pendulum term, unsteady lift lag,
-ventilation. Linearised at trim the model has one slow unstable real pole (+0.17 1/s, heave) and
-a stiff pitch/heave pair; with the seed's LQR a closed-loop pole sits near -8846 1/s, so
+modelled). Left out, as docs/models.md 2.6 lists: the lift-below-CG pendulum term, unsteady lift
+lag, ventilation. Linearised at trim the model has one slow unstable real pole (+0.17 1/s, heave)
+and a stiff pitch/heave pair; with the paper's LQR a closed-loop pole sits near -8846 1/s, so
 integrate with dt <= 1e-4 s (RK4) or discretise the linearisation exactly.
 """
 
@@ -57,18 +58,18 @@ from .base import FloatArray, VehicleModel, require
 
 @dataclasses.dataclass(frozen=True)
 class HydrofoilParams:
-    """Parameters of the hydrofoil model; names are MODELS.md's symbols. SI units, radians."""
+    """Parameters of the hydrofoil model; names are docs/models.md's symbols. SI units, radians."""
 
     m: float = 102.04  #: mass, kg  [SEED]
     J: float = 14.35  #: pitch moment of inertia J_yy, kg m^2  [SEED]
-    g: float = 9.80  #: gravity, m/s^2  [SEED: the seed uses 9.80]
+    g: float = 9.80  #: gravity, m/s^2  [SEED: the hydrofoil AKF paper uses 9.80]
     rho: float = 1025.0  #: seawater density, kg/m^3  [global convention]
     #: strut ("connecting rod") length: the foils sit l below the CG, m  [SEED; RECON reading]
-    l: float = 2.0  # noqa: E741 (MODELS.md symbol)
+    l: float = 2.0  # noqa: E741 (docs/models.md symbol)
     l1: float = 0.2  #: front foil ahead of the CG, m  [SEED]
     l2: float = 1.0  #: rear foil behind the CG, m  [SEED]
     l3: float = 1.9  #: thrust line below the CG, m  [SEED]
-    l4: float = 0.2  #: strut-drag moment arm, m  [SEED; seed-literal]
+    l4: float = 0.2  #: strut-drag moment arm, m  [SEED; taken literally from the paper]
     span1: float = 0.67  #: front foil span, m  [SEED]
     chord1: float = 0.22  #: front foil chord, m  [SEED]
     span2: float = 0.39  #: rear foil span, m  [SEED]
@@ -81,7 +82,7 @@ class HydrofoilParams:
     cs: float = 0.10  #: strut chord, m  [PROPOSED]
     alpha_stall: float = math.radians(12.0)  #: stall clip on the angle of attack, rad [PROPOSED]
     lift_slope: Literal["prandtl", "helmbold"] = "prandtl"  #: lift-slope formula  [RECON choice]
-    added_mass: bool = False  #: add the foils' heave added mass  [PROPOSED; off as in the seed]
+    added_mass: bool = False  #: add the foils' heave added mass  [PROPOSED; off as in the paper]
     #: foil rotation limit |alpha_s,i| <= alpha_max, rad  [PROPOSED: 15 deg, a little beyond the
     #: 12 deg stall so the controller can reach stall but not flip the foil]
     alpha_max: float = math.radians(15.0)
@@ -143,7 +144,7 @@ class HydrofoilParams:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class HydrofoilTrim:
-    """The trim (equilibrium) at ``(xi0, theta0)``, speed U, calm water (MODELS.md 2.3).
+    """The trim (equilibrium) at ``(xi0, theta0)``, speed U, calm water (docs/models.md 2.3).
     Arrays are [front, rear].
 
     :param alpha_s0: foil angles, rad.
@@ -170,9 +171,9 @@ def _rows(a: FloatArray) -> FloatArray:
 
 
 class HydrofoilModel(VehicleModel):
-    """Heave/pitch of a fully-submerged two-foil craft at constant speed (seed 001).
+    """Heave/pitch of a fully-submerged two-foil craft at constant speed (the hydrofoil AKF paper).
 
-    :param params: :class:`HydrofoilParams`; ``None`` for the nominal (seed) craft.
+    :param params: :class:`HydrofoilParams`; ``None`` for the paper's nominal craft.
     :raises ValueError: the parameters admit no trim with both foils submerged and unstalled.
 
     :ivar trim: the :class:`HydrofoilTrim`, solved at construction.
@@ -270,7 +271,7 @@ class HydrofoilModel(VehicleModel):
         return heave, pitch, (L1, L2), (C_L1, C_L2), (D1, D2), f, (h1, h2)
 
     def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
-        """Continuous-time state derivative (MODELS.md 2.3).
+        """Continuous-time state derivative (docs/models.md 2.3).
 
         :param x: ``[xi, theta, xi_dot, theta_dot]``, shape ``(..., 4)``, m, rad, m/s, rad/s.
         :param u: ``[alpha_s1, alpha_s2]``, shape ``(..., 2)``, rad (absolute foil angles).

@@ -1,11 +1,12 @@
-"""ROV/AUV with a morphing hull, Prestero REMUS-100 coefficients (seed 002; MODELS.md section 3).
+"""ROV/AUV with a morphing hull, Prestero REMUS-100 coefficients (the morphing-robot patent;
+docs/models.md section 3).
 
 Six-degree-of-freedom rigid body with the body origin at the centre of buoyancy (CB), SNAME/NED
 axes (x forward, y starboard, z down), ZYX Euler angles. ``x = [u v w p q r  x y z  phi theta psi
 s]``: body velocities nu (m/s, rad/s), NED position (m, z down), Euler angles (rad) and the morph
 fraction ``s`` (0 = cruise, 1 = work shape, manipulator deployed at the bow). ``u = tau = [X Y Z K
 M N]``: generalised forces at the CB (N, N m). ``d = [current_n current_e current_d s_cmd]``: a
-constant, irrotational ocean current in NED (m/s) and the morph command (-). MODELS.md 3.2::
+constant, irrotational ocean current in NED (m/s) and the morph command (-). docs/models.md 3.2::
 
     (M_RB(s) + M_A) nu_dot = -C_RB(nu, s) nu + tau_hyd(nu_r, s) + tau_s(eta, s) + tau
                              - M_A [w x nu_c; 0]          (current only, see "Current")
@@ -32,6 +33,8 @@ constant, irrotational ocean current in NED (m/s) and the morph command (-). MOD
     Y_s =  (W-B) cos(theta) sin(phi) M_s = -g_z sin(theta) - g_x cos(theta) cos(phi)
     Z_s =  (W-B) cos(theta) cos(phi) N_s =  g_x cos(theta) sin(phi) + g_y sin(theta)
 
+Parameters, the work shape and the thrusters: :mod:`marine_envs.models.rov_params`.
+
 **Current.** ``nu_r = nu - [nu_c; 0 0 0]``, ``nu_c = R(eta)^T v_c`` with ``v_c`` the NED current,
 assumed constant and irrotational. The hydrodynamic terms act on the velocity through the water
 ``nu_r``; the rigid-body terms and the kinematics on ``nu`` (velocity over ground). The added-mass
@@ -41,32 +44,6 @@ inertia accelerates the water-relative motion, ``M_A nu_r_dot = M_A nu_dot + M_A
 (``current_inertia="ground"``) drops the force ``-M_A [w x nu_c; 0]``; it is not energy-consistent:
 a drifting boat that turns in the current gains relative speed again instead of settling.
 
-**Morph** [PROPOSED, MODELS.md 3.4]. Every quadratic coefficient that the deployed arm changes,
-``r_G``, ``r_B`` and ``I_b`` are interpolated as ``theta(s) = theta_c + s (theta_w - theta_c)``;
-``m``, ``W``, ``B``, the added mass and the cross-flow/lift coefficients do not change. ``s`` is
-not clipped: a command outside [0, 1] extrapolates linearly. The optional +5 % added mass of the
-flooded bay (MODELS.md 3.4) is not modelled.
-
-**Actuation.** The inputs are generalised forces: an idealised, fully actuated vehicle. The
-[PROPOSED] six-thruster layout of MODELS.md 3.5 (:data:`THRUSTER_ALLOCATION`, :func:`allocate`)
-gives the bounds of X, Y, Z, M and N (the box of each row's reachable range; the jointly reachable
-set is smaller, e.g. X and N share the stern thrusters). Its roll row is zero, so K gets a small
-[PROPOSED] idealised range +-K_max; with thrusters only, roll is left to the BG pendulum.
-In work shape the bow-down moment ``x_G W - x_B B = 11.3 N m`` exceeds the pitch range of
-MODELS.md's +-10 N vertical tunnels (7.5 N m, less the 7 N buoyancy trim they also carry), so the
-vertical tunnels here are rated +-25 N [PROPOSED, deviating from MODELS.md 3.5; a T200-class
-thruster]: the pitch range becomes +-18.75 N m and the level work-shape trim (f5 = -11.3 N,
-f6 = +18.3 N) is reachable, which the seed reaches with its variable-structure device.
-
-**Stability (a property of the cited coefficients, not of this code).** Prestero's damping of
-roll and pitch is quadratic, so at hover the BG pendulums (about 5.6 and 0.85 rad/s in cruise) are
-undamped to first order. Under way, the Munk moments of the streamlined hull dominate: with
-``Nuv < 0`` the vehicle is directionally unstable at every forward speed, and with ``Muw > 0``
-pitch is unstable above 0.60 m/s (0.84 m/s in work shape; at 1.5 m/s: pitch eigenvalues
-0.42 +- 0.22j 1/s, yaw divergence +1.0 1/s), while roll stays stable. REMUS flies under
-autopilot; DSTO's listing adds Fodrea's revised linear coefficients (Mw = -9.3, Nv = -4.47),
-which MODELS.md does not use.
-
 **Implementation.** ``rhs`` is written for batches (one contiguous row per state): the forces are
 linear in a feature matrix ``F`` of products (``u|u|``, ``w q``, ``sin(theta)``, ``tau``, ...),
 ``tau_total = C_0^T F + s dC^T F_morph``. ``M(s) = M_0 + s dM`` is inverted exactly for every
@@ -74,11 +51,11 @@ linear in a feature matrix ``F`` of products (``u|u|``, ``w q``, ``sin(theta)``,
 ``M(s)^-1 = V diag(1 / (1 + s lam)) V^T``. With ``V^T`` folded into the coefficients, ``nu_dot``
 costs one (12 x 41) GEMM, a scaling and a 6x6 product (one 6-row GEMM with ``M_0^-1`` folded in
 when the whole batch is in cruise shape). Without a current the hydrodynamic and rigid-body
-``omega nu`` products coincide and are folded together. A single boat takes a path on Python
-floats with the same feature layout.
+``omega nu`` products coincide and are folded together. One boat is a batch of one: the
+equations exist once, in :meth:`ROVModel.rhs`.
 
-**Identification** (seed 002). :data:`SEED_COEFFICIENTS` are the 18 viscous coefficients the seed
-identifies online. ``tau_hyd`` is linear in every coefficient:
+**Identification** (the morphing-robot patent). :data:`SEED_COEFFICIENTS` are the 18 viscous
+coefficients the patent identifies online. ``tau_hyd`` is linear in every coefficient:
 :meth:`ROVModel.hydrodynamic_regressors` gives its exact regressor ``Phi``;
 :meth:`ROVModel.rhs_with` takes a coefficient's value AT THE CURRENT SHAPE (what an online
 identifier sees) and is ``rhs(x, u + Phi (theta - c(s)), d)``;
@@ -87,223 +64,31 @@ identifier sees) and is ``rhs(x, u + Phi (theta - c(s)), d)``;
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
-import numbers
 from collections.abc import Mapping, Sequence
-from typing import ClassVar, Literal
+from typing import ClassVar
 
 import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from .base import FloatArray, VehicleModel, require
-
-# -- thrusters (MODELS.md 3.5, [PROPOSED]) ------------------------------------------------------
-#: Thruster positions relative to the CB, m (rows: stern port, stern stbd, bow lateral, stern
-#: lateral, bow vertical, stern vertical).
-THRUSTER_POSITIONS: FloatArray = np.array([
-    [-0.60, -0.10, 0.0], [-0.60, 0.10, 0.0], [0.40, 0.0, 0.0],
-    [-0.45, 0.0, 0.0], [0.35, 0.0, 0.0], [-0.40, 0.0, 0.0]])
-#: Unit thrust directions in body axes.
-THRUSTER_DIRECTIONS: FloatArray = np.array([
-    [1.0, 0, 0], [1.0, 0, 0], [0, 1.0, 0], [0, 1.0, 0], [0, 0, 1.0], [0, 0, 1.0]])
-#: Allocation matrix B_T (6x6): tau = B_T f, column i = [d_i; r_i x d_i]. Rank 5, zero roll row.
-THRUSTER_ALLOCATION: FloatArray = np.vstack([
-    THRUSTER_DIRECTIONS.T, np.cross(THRUSTER_POSITIONS, THRUSTER_DIRECTIONS).T]) + 0.0  # no -0
-#: Thrust limits (low, high) of each thruster, N; the vertical tunnels are stronger than MODELS.md's
-#: +-10 N so that the work shape can be trimmed level (see the module docstring).
-THRUSTER_LIMITS: tuple[FloatArray, FloatArray] = (
-    np.array([-20.0, -20.0, -10.0, -10.0, -25.0, -25.0]),
-    np.array([30.0, 30.0, 10.0, 10.0, 25.0, 25.0]))
-for _a in (THRUSTER_POSITIONS, THRUSTER_DIRECTIONS, THRUSTER_ALLOCATION, *THRUSTER_LIMITS):
-    _a.flags.writeable = False
-_ALLOCATION_PINV_T = np.linalg.pinv(THRUSTER_ALLOCATION).T
-
-
-def allocate(tau: ArrayLike) -> FloatArray:
-    """Thruster forces for generalised forces ``tau`` (shape ``(..., 6)``, N and N m):
-    ``f = pinv(B_T) tau``, then saturated to :data:`THRUSTER_LIMITS` (shape ``(..., 6)``, N).
-
-    The roll component of ``tau`` is ignored (no roll authority); saturation is per thruster, so a
-    saturated ``f`` no longer reproduces ``tau`` exactly.
-    """
-    f = np.asarray(tau, dtype=float) @ _ALLOCATION_PINV_T
-    return np.clip(f, *THRUSTER_LIMITS)
-
-
-def _thruster_box() -> tuple[FloatArray, FloatArray]:
-    """Per-row reachable range of B_T f over the thruster limits (a box, not the exact set)."""
-    low, high = THRUSTER_LIMITS
-    ends = np.stack([THRUSTER_ALLOCATION * low, THRUSTER_ALLOCATION * high])
-    return ends.min(axis=0).sum(axis=1), ends.max(axis=0).sum(axis=1)
-
-
-# -- parameters ---------------------------------------------------------------------------------
-#: Quantities that the morph changes (MODELS.md 3.4); each has a ``work_<name>`` field.
-MORPHING: tuple[str, ...] = ("Xuu", "Yvv", "Zww", "Kpp", "Mqq", "Nrr", "Yrr", "Zqq", "Mww", "Nvv",
-                             "xG", "yG", "zG", "xB", "yB", "zB", "Ixx", "Iyy", "Izz")
-#: Hydrodynamic coefficients of tau_hyd, in MODELS.md 3.2 order.
-HYDRO_COEFFICIENTS: tuple[str, ...] = (
-    "Xuu", "Xwq", "Xqq", "Xvr", "Xrr", "Yvv", "Yrr", "Yuv", "Ywp", "Yur", "Ypq",
-    "Zww", "Zqq", "Zuw", "Zvp", "Zuq", "Zrp", "Kpp", "Mww", "Mqq", "Muw", "Muq", "Mvp", "Mrp",
-    "Nvv", "Nrr", "Nuv", "Nur", "Nwp", "Npq")
-#: The 18 viscous coefficients that seed 002 identifies online (its order; MODELS.md names).
-SEED_COEFFICIENTS: tuple[str, ...] = (
-    "Xuu", "Yvv", "Yuv", "Zww", "Zuw", "Yrr", "Yur", "Zqq", "Zuq", "Mww", "Muw", "Nvv", "Nuv",
-    "Kpp", "Mqq", "Muq", "Nrr", "Nur")
-_SHAPE = (*HYDRO_COEFFICIENTS, "xG", "yG", "zG", "xB", "yB", "zB", "Ixx", "Iyy", "Izz")
-_DISSIPATIVE = ("Xuu", "Yvv", "Zww", "Kpp", "Mqq", "Nrr")
-_ADDED_MASS_DIAGONAL = ("Xud", "Yvd", "Zwd", "Kpd", "Mqd", "Nrd")
-
-
-@dataclasses.dataclass(frozen=True)
-class ROVParams:
-    """Parameters of the ROV model; names are MODELS.md's symbols (``Xuu`` = X_u|u|, ``Xud`` =
-    X_u-dot). SI units, radians. Cruise values: Prestero's REMUS-100 (MODELS.md 3.3, [CITED] via
-    the DSTO ``remus100_withM.m`` listing and GTRI SCRIMMAGE ``UUV6DOF.xml`` unless tagged);
-    ``work_*``: the work shape's absolute values (MODELS.md 3.4 table, [PROPOSED])."""
-
-    # rigid body, origin at the CB
-    m: float = 30.48  #: mass, kg  [CITED]
-    W: float = 299.0  #: weight, N  [CITED]
-    B: float = 306.0  #: buoyancy, N  [CITED]
-    #: water density, kg/m^3 [CITED]; for the record only: the coefficients are dimensional
-    rho: float = 1030.0
-    xG: float = 0.0  #: centre of gravity rel. CB, m  [CITED]
-    yG: float = 0.0  #: m  [CITED]
-    zG: float = 0.0196  #: m (below the CB)  [CITED]
-    xB: float = 0.0  #: centre of buoyancy rel. origin, m (origin at the CB)  [CITED]
-    yB: float = 0.0  #: m  [CITED]
-    zB: float = 0.0  #: m  [CITED]
-    Ixx: float = 0.177  #: roll inertia about the CB, kg m^2  [CITED]
-    Iyy: float = 3.45  #: kg m^2  [CITED]
-    Izz: float = 3.45  #: kg m^2  [CITED]
-    # added mass (unchanged by the morph)
-    Xud: float = -0.93  #: kg  [CITED]
-    Yvd: float = -35.5  #: kg  [CITED]
-    Zwd: float = -35.5  #: kg  [CITED]
-    Kpd: float = -0.0141  #: kg m^2  [CITED: Prestero/SCRIMMAGE; DSTO's revised -0.0704 not used]
-    Mqd: float = -4.88  #: kg m^2  [CITED]
-    Nrd: float = -4.88  #: kg m^2  [CITED]
-    Yrd: float = 1.93  #: kg m  [CITED]
-    Nvd: float = 1.93  #: kg m  [CITED]
-    Zqd: float = -1.93  #: kg m  [CITED]
-    Mwd: float = -1.93  #: kg m  [CITED]
-    # combined hydrodynamic coefficients, cruise shape (MODELS.md 3.3)
-    Xuu: float = -1.62  #: kg/m  [CITED]
-    Yvv: float = -131.0  #: kg/m  [CITED: SCRIMMAGE/Prestero; DSTO lists -1310]
-    Zww: float = -131.0  #: kg/m  [CITED: SCRIMMAGE/Prestero; DSTO lists -1310]
-    Yrr: float = 0.632  #: kg m/rad^2  [CITED]
-    Zqq: float = -0.632  #: kg m/rad^2  [CITED]
-    Mww: float = 3.18  #: kg  [CITED]
-    Nvv: float = -3.18  #: kg  [CITED]
-    Mqq: float = -188.0  #: kg m^2/rad^2  [CITED: Prestero; SCRIMMAGE's -9.4 not used]
-    Nrr: float = -94.0  #: kg m^2/rad^2  [CITED]
-    Kpp: float = -1.30e-3  #: kg m^2/rad^2  [RECALLED: Prestero; DSTO lists -0.130]
-    Yuv: float = -28.6  #: kg/m  [CITED]
-    Zuw: float = -28.6  #: kg/m  [CITED]
-    Yur: float = 5.22  #: kg/rad  [CITED]
-    Zuq: float = -5.22  #: kg/rad  [CITED]
-    Muw: float = 24.0  #: kg  [CITED]
-    Nuv: float = -24.0  #: kg  [CITED]
-    Muq: float = -2.0  #: kg m/rad  [CITED]
-    Nur: float = -2.0  #: kg m/rad  [CITED]
-    Xwq: float = -35.5  #: kg/rad  [CITED]
-    Ywp: float = 35.5  #: kg/rad  [CITED]
-    Zvp: float = -35.5  #: kg/rad  [CITED]
-    Xvr: float = 35.5  #: kg/rad  [CITED]
-    Xqq: float = -1.93  #: kg m/rad  [CITED]
-    Xrr: float = -1.93  #: kg m/rad  [CITED]
-    Ypq: float = 1.93  #: kg m/rad  [CITED]
-    Zrp: float = 1.93  #: kg m/rad  [CITED]
-    Mvp: float = -1.93  #: kg m/rad  [CITED]
-    Nwp: float = -1.93  #: kg m/rad  [CITED]
-    Mrp: float = 4.86  #: kg m^2/rad^2  [CITED]
-    Npq: float = -4.86  #: kg m^2/rad^2  [CITED]
-    # morph: first-order lag and the work shape (absolute values, not increments)
-    T_m: float = 5.0  #: morph time constant, s  [PROPOSED]
-    work_Xuu: float = -15.30  #: kg/m  [PROPOSED]
-    work_Yvv: float = -142.33  #: kg/m  [PROPOSED]
-    work_Zww: float = -139.01  #: kg/m  [PROPOSED]
-    work_Yrr: float = -6.52  #: kg m/rad^2  [PROPOSED]
-    work_Zqq: float = 4.42  #: kg m/rad^2  [PROPOSED]
-    work_Mww: float = 9.49  #: kg  [PROPOSED]
-    work_Mqq: float = -192.11  #: kg m^2/rad^2  [PROPOSED]
-    work_Nvv: float = -12.11  #: kg  [PROPOSED]
-    work_Nrr: float = -99.82  #: kg m^2/rad^2  [PROPOSED]
-    work_Kpp: float = -0.214  #: kg m^2/rad^2  [PROPOSED]
-    work_xG: float = 0.0480  #: m  [PROPOSED]
-    work_yG: float = 0.0  #: m  [PROPOSED]
-    work_zG: float = 0.0419  #: m  [PROPOSED]
-    work_xB: float = 0.0101  #: m  [PROPOSED]
-    work_yB: float = 0.0  #: m  [PROPOSED]
-    work_zB: float = 0.0047  #: m  [PROPOSED]
-    work_Ixx: float = 0.331  #: kg m^2  [PROPOSED]
-    work_Iyy: float = 5.196  #: kg m^2  [PROPOSED]
-    work_Izz: float = 5.042  #: kg m^2  [PROPOSED]
-    # actuation
-    K_max: float = 1.0  #: idealised roll-moment bound, N m  [PROPOSED: thrusters have none]
-    #: What the added-mass inertia accelerates in a current (see the module docstring):
-    #: "relative" (nu_r_dot, Fossen's exact form for a constant irrotational current) or
-    #: "ground" (nu_dot, the simpler approximation).
-    current_inertia: Literal["relative", "ground"] = "relative"
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if f.name == "current_inertia":
-                require(value in ("relative", "ground"), f.name, value,
-                        "must be 'relative' or 'ground'")
-                continue
-            require(isinstance(value, numbers.Real) and not isinstance(value, bool)
-                    and math.isfinite(value), f.name, value, "must be a finite number")
-        positive = ("m", "W", "B", "rho", "T_m", "K_max", "Ixx", "Iyy", "Izz",
-                    "work_Ixx", "work_Iyy", "work_Izz")
-        for name in positive:
-            require(getattr(self, name) > 0, name, getattr(self, name), "must be > 0")
-        for name in (*_DISSIPATIVE, *(f"work_{n}" for n in _DISSIPATIVE), *_ADDED_MASS_DIAGONAL):
-            require(getattr(self, name) <= 0, name, getattr(self, name),
-                    "must be <= 0 (dissipative damping / positive added mass)")
-        for s in (0.0, 1.0):  # M(s) is affine in s: positive definite at both ends suffices
-            mass = mass_matrix(self, s)
-            eig = np.linalg.eigvalsh(0.5 * (mass + mass.T))
-            require(bool(eig.min() > 0), f"M_RB + M_A at s={s:g}", eig.round(6).tolist(),
-                    "must be positive definite (check m, xG/yG/zG, Ixx/Iyy/Izz, their work_ "
-                    "values and the added-mass derivatives)")
-
-    def shape_at(self, s: float) -> dict[str, float]:
-        """Every morphing quantity at morph fraction ``s``: hydrodynamic coefficients, ``r_G``,
-        ``r_B`` (m) and ``I_b`` (kg m^2), ``theta(s) = theta_c + s (theta_w - theta_c)``, keyed by
-        the cruise names. Non-morphing coefficients are included unchanged."""
-        out = {}
-        for name in _SHAPE:
-            cruise = getattr(self, name)
-            out[name] = (cruise + s * (getattr(self, f"work_{name}") - cruise)
-                         if name in MORPHING else cruise)
-        return out
-
-
-def mass_matrix(params: ROVParams, s: float = 0.0) -> FloatArray:
-    """``M_RB(s) + M_A`` (6x6, kg, kg m, kg m^2) at morph fraction ``s``."""
-    k, c = params, params.shape_at(s)
-    mS = k.m * _skew(np.array([c["xG"], c["yG"], c["zG"]]))
-    rigid = np.block([[k.m * np.eye(3), -mS], [mS, np.diag([c["Ixx"], c["Iyy"], c["Izz"]])]])
-    return rigid + added_mass(k)
-
-
-def added_mass(params: ROVParams) -> FloatArray:
-    """``M_A`` (6x6, kg, kg m, kg m^2), unchanged by the morph."""
-    k = params
-    return -np.array([[k.Xud, 0, 0, 0, 0, 0], [0, k.Yvd, 0, 0, 0, k.Yrd],
-                      [0, 0, k.Zwd, 0, k.Zqd, 0], [0, 0, 0, k.Kpd, 0, 0],
-                      [0, 0, k.Mwd, 0, k.Mqd, 0], [0, k.Nvd, 0, 0, 0, k.Nrd]])
-
-
-def _skew(a: FloatArray) -> FloatArray:
-    """S(a) with S(a) b = a x b."""
-    return np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+from .kinematics import body_to_ned, euler_rates, ned_to_body, skew
+from .rov_params import (
+    HYDRO_COEFFICIENTS,
+    MORPHING,
+    SEED_COEFFICIENTS,
+    THRUSTER_ALLOCATION,
+    THRUSTER_DIRECTIONS,
+    THRUSTER_LIMITS,
+    THRUSTER_POSITIONS,
+    ROVParams,
+    added_mass,
+    allocate,
+    mass_matrix,
+    thruster_box,
+)
 
 
 def _cross_map() -> FloatArray:
@@ -354,7 +139,7 @@ def _coefficient_matrix(k: ROVParams, c: dict[str, float]) -> FloatArray:
     # rigid-body Coriolis, part linear in nu1: a = omega x nu1
     r_G = np.array([c["xG"], c["yG"], c["zG"]])
     C[_OMN, :3] = -k.m * _CROSS  # -m omega x nu1
-    C[_OMN, 3:] = -k.m * _CROSS @ _skew(r_G).T  # -m r_G x (omega x nu1)
+    C[_OMN, 3:] = -k.m * _CROSS @ skew(r_G).T  # -m r_G x (omega x nu1)
     # rigid-body Coriolis, part quadratic in omega: split exactly into the monomials of _ANG
     inertia = np.array([c["Ixx"], c["Iyy"], c["Izz"]])
 
@@ -439,23 +224,17 @@ def _relative_motion(x: FloatArray, d: FloatArray) -> FloatArray:
     current = d[:, :3]
     if not current.any():
         return motion
-    sphi, sth, spsi = np.sin(x[:, 9:12]).T
-    cphi, cth, cpsi = np.cos(x[:, 9:12]).T
-    vn, ve, vd = current.T
-    a = cpsi * vn + spsi * ve
-    b = cpsi * ve - spsi * vn
-    c = sth * a + cth * vd
-    motion[:, 0] -= cth * a - sth * vd
-    motion[:, 1] -= cphi * b + sphi * c
-    motion[:, 2] -= cphi * c - sphi * b
+    angles = x[:, 9:12].T
+    motion[:, :3] -= np.array(ned_to_body(np.sin(angles), np.cos(angles), *current.T)).T
     return motion
 
 
 class ROVModel(VehicleModel):
-    """REMUS-100-type AUV/ROV with a cruise/work morphing hull (seed 002; MODELS.md 3).
+    """REMUS-100-type AUV/ROV with a cruise/work morphing hull (the morphing-robot patent;
+    docs/models.md 3).
 
     :param params: the parameters; ``None`` = nominal (Prestero's REMUS-100 cruise shape and the
-        [PROPOSED] work shape of MODELS.md 3.4).
+        [PROPOSED] work shape of docs/models.md 3.4).
     """
 
     name: ClassVar[str] = "rov"
@@ -506,19 +285,18 @@ class ROVModel(VehicleModel):
         self._lam, self._lam_col, self._V = lam, lam[:, None].copy(), np.ascontiguousarray(V)
         self._L = np.ascontiguousarray(L)
         # nu_dot = V (A F + s B F[_MORPH]) / (1 + s lam); with s = 0 everywhere: nu_dot = P F
-        self._A_cur, self._A_still = L @ C0_cur.T, L @ still.T
-        self._B = L @ dC[_MORPH].T
-        self._P_cur, self._P_still = V @ self._A_cur, V @ self._A_still
+        A_cur, A_still = L @ C0_cur.T, L @ still.T
+        self._P_cur, self._P_still = V @ A_cur, V @ A_still
         # [A; B] stacked over the features in use: one GEMM for both (B padded with zeros)
         self._AB_cur = np.zeros((12, _N_FEATURES))
-        self._AB_cur[:6], self._AB_cur[6:, _MORPH] = self._A_cur, self._B
+        self._AB_cur[:6], self._AB_cur[6:, _MORPH] = A_cur, L @ dC[_MORPH].T
         self._AB_still = self._AB_cur[:, _STILL].copy()
-        self._AB_still[:6] = self._A_still
+        self._AB_still[:6] = A_still
         self._inv_T_m = 1.0 / k.T_m
         self._x0 = np.zeros(len(self.state_names))
         self._x0[[0, 8]] = self.cruise_speed, self.cruise_depth
         self._u0 = self.trim_forces(self.cruise_speed, 0.0)
-        low, high = _thruster_box()
+        low, high = thruster_box()
         low[_K], high[_K] = -k.K_max, k.K_max
         self._u_bounds = (low, high)
 
@@ -661,8 +439,6 @@ class ROVModel(VehicleModel):
 
     def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
         x, u, d, shape = self._flat(x, u, d)
-        if x.shape[0] == 1:  # single boat: Python floats beat numpy's per-call overhead
-            return self._rhs_one(x[0], u[0], d[0]).reshape(*shape, 13)
         xt = np.ascontiguousarray(x.T)  # one row per state: contiguous rows for every op
         F, (sin, cos), current = self._features(xt, u, d)
         out = np.empty((13, xt.shape[1]))
@@ -676,21 +452,9 @@ class ROVModel(VehicleModel):
             np.matmul(self._V, y, out=out[:6])
         else:  # the whole batch in cruise shape: M0^-1 is folded into one matrix
             np.matmul(self._P_cur if current else self._P_still, used, out=out[:6])
-        # kinematics: NED velocity R nu1 = Rz Ry Rx nu1, then the Euler-angle rates
-        sphi, sth, spsi = sin
-        cphi, cth, cpsi = cos
-        u_, v_, w_, p_, q_, r_ = xt[:6]
-        b = cphi * v_ - sphi * w_
-        c = sphi * v_ + cphi * w_
-        a = cth * u_ + sth * c
-        out[6] = cpsi * a - spsi * b
-        out[7] = spsi * a + cpsi * b
-        out[8] = cth * c - sth * u_
-        t1 = q_ * sphi + r_ * cphi
-        sec = 1.0 / cth
-        out[9] = p_ + t1 * sth * sec
-        out[10] = q_ * cphi - r_ * sphi
-        np.multiply(t1, sec, out=out[11])
+        # kinematics: NED velocity and Euler-angle rates
+        out[6], out[7], out[8] = body_to_ned(sin, cos, *xt[:3])
+        out[9], out[10], out[11] = euler_rates(sin, cos, *xt[3:6])
         np.subtract(d[:, 3], s, out=out[12])
         out[12] *= self._inv_T_m
         return out.T.reshape(*shape, 13)
@@ -725,20 +489,12 @@ class ROVModel(VehicleModel):
         np.divide(2.0, two_den, out=two_den)
         sin = t * two_den
         cos = np.subtract(two_den, 1.0, out=two_den)
-        sphi, sth, spsi = sin
-        cphi, cth, cpsi = cos
         nu1, om = xt[0:3], xt[3:6]
         cur = d[:, :3]
         current = bool(cur.any())
         if current:
-            vn, ve, vd = cur.T  # body-frame current R^T v_c = Rx^T Ry^T Rz^T v_c
-            a = cpsi * vn + spsi * ve
-            b = cpsi * ve - spsi * vn
-            c = sth * a + cth * vd
             nur = F[_ABS]  # u_r v_r w_r p q r, squared in place once the products are taken
-            np.subtract(nu1[0], cth * a - sth * vd, out=nur[0])
-            np.subtract(nu1[1], cphi * b + sphi * c, out=nur[1])
-            np.subtract(nu1[2], cphi * c - sphi * b, out=nur[2])
+            np.subtract(nu1, ned_to_body(sin, cos, *cur.T), out=nur[:3])
             nur[3:] = om
             nur1 = nur[:3]
         else:
@@ -752,47 +508,13 @@ class ROVModel(VehicleModel):
         np.multiply(om, om, out=F[ang:ang + 3])
         np.multiply(om[0], om[1:3], out=F[ang + 3:ang + 5])
         np.multiply(om[1], om[2], out=F[ang + 5])
-        F[_RES.start] = sth
-        np.multiply(cth, sin[0], out=F[_RES.start + 1])
-        np.multiply(cth, cphi, out=F[_RES.start + 2])
+        F[_RES.start] = sin[1]  # sin(theta), cos(theta) sin(phi), cos(theta) cos(phi)
+        np.multiply(cos[1], sin[0], out=F[_RES.start + 1])
+        np.multiply(cos[1], cos[0], out=F[_RES.start + 2])
         F[_TAU] = u.T
         return F, (sin, cos), current
 
-    def _rhs_one(self, x: FloatArray, u: FloatArray, d: FloatArray) -> FloatArray:
-        """:meth:`rhs` of one boat on Python floats (same equations and feature layout)."""
-        u_, v, w, p, q, r, _, _, _, phi, theta, psi, s = x.tolist()
-        vn, ve, vd, s_cmd = d.tolist()
-        sphi, cphi = math.sin(phi), math.cos(phi)
-        sth, cth = math.sin(theta), math.cos(theta)
-        spsi, cpsi = math.sin(psi), math.cos(psi)
-        if vn or ve or vd:
-            a = cpsi * vn + spsi * ve
-            b = cpsi * ve - spsi * vn
-            c = sth * a + cth * vd
-            ur, vr, wr = u_ - (cth * a - sth * vd), v - (cphi * b + sphi * c), \
-                w - (cphi * c - sphi * b)
-            f = [p * ur, p * vr, p * wr, q * ur, q * vr, q * wr, r * ur, r * vr, r * wr]
-            A, P = self._A_cur, self._P_cur
-        else:
-            ur, vr, wr = u_, v, w
-            f = []
-            A, P = self._A_still, self._P_still
-        f += [ur * vr, ur * wr, *u.tolist(),
-              ur * abs(ur), vr * abs(vr), wr * abs(wr), p * abs(p), q * abs(q), r * abs(r),
-              p * u_, p * v, p * w, q * u_, q * v, q * w, r * u_, r * v, r * w,
-              p * p, q * q, r * r, p * q, p * r, q * r, sth, cth * sphi, cth * cphi]
-        out = np.empty(13)
-        feats = np.array(f)
-        if s:
-            y = A @ feats + s * (self._B @ feats[-24:])
-            y /= 1.0 + s * self._lam
-            out[:6] = self._V @ y
-        else:
-            out[:6] = P @ feats
-        b = cphi * v - sphi * w
-        c = sphi * v + cphi * w
-        a = cth * u_ + sth * c
-        t1 = q * sphi + r * cphi
-        out[6:] = (cpsi * a - spsi * b, spsi * a + cpsi * b, cth * c - sth * u_,
-                   p + t1 * sth / cth, q * cphi - r * sphi, t1 / cth, (s_cmd - s) * self._inv_T_m)
-        return out
+
+__all__ = ["HYDRO_COEFFICIENTS", "MORPHING", "SEED_COEFFICIENTS", "THRUSTER_ALLOCATION",
+           "THRUSTER_DIRECTIONS", "THRUSTER_LIMITS", "THRUSTER_POSITIONS", "ROVModel",
+           "ROVParams", "added_mass", "allocate", "mass_matrix"]

@@ -1,6 +1,6 @@
-"""USV: 5-state rudder-sway-yaw-roll model (seed 000; MODELS.md section 1).
+"""USV: 5-state rudder-sway-yaw-roll model (the USV observer patent; docs/models.md section 1).
 
-Van Amerongen / Van der Klugt rudder-roll structure with the seed's parameters::
+Van Amerongen / Van der Klugt rudder-roll structure with the patent's parameters::
 
     v_dot   = (-v + Kdv*delta) / Tv
     r_dot   = (Kvr*v - r + Kdr*delta) / Tr + w_psi
@@ -10,9 +10,9 @@ Van Amerongen / Van der Klugt rudder-roll structure with the seed's parameters::
 
 ``x = [v, r, psi, p, phi]`` (m/s, rad/s, rad, rad/s, rad), ``u = [delta]`` (rad),
 ``d = [w_psi, w_phi]`` (rad/s^2): wave yaw and roll moments per unit inertia entering the r and p
-rows. That is reading (a) of MODELS.md 1.2, the only one for which the seed's observer is feasible;
-reading (b), disturbances entering the psi and phi rows, is kept as ``wave_input="angle"`` for
-model-mismatch studies.
+rows. That is reading (a) of docs/models.md 1.2, the only one for which the patent's observer is
+feasible; reading (b), disturbances entering the psi and phi rows, is kept as
+``wave_input="angle"`` for model-mismatch studies.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ from .base import FloatArray, VehicleModel, require
 
 @dataclasses.dataclass(frozen=True)
 class USVParams:
-    """Parameters of the USV model; names are MODELS.md's symbols. SI units, radians."""
+    """Parameters of the USV model; names are docs/models.md's symbols. SI units, radians."""
 
     Kvr: float = -0.46  #: sway-to-yaw-rate gain, rad/s per m/s  [SEED]
     wn: float = 0.63  #: roll natural frequency, rad/s  [SEED]
@@ -57,7 +57,7 @@ class USVParams:
 
 
 class USVModel(VehicleModel):
-    """Rudder-roll-yaw model of an unmanned surface vessel (seed 000)."""
+    """Rudder-roll-yaw model of an unmanned surface vessel (the USV observer patent)."""
 
     name: ClassVar[str] = "usv"
     state_names: ClassVar[tuple[str, ...]] = ("v", "r", "psi", "p", "phi")
@@ -66,7 +66,7 @@ class USVModel(VehicleModel):
     state_units: ClassVar[tuple[str, ...]] = ("m/s", "rad/s", "rad", "rad/s", "rad")
     input_units: ClassVar[tuple[str, ...]] = ("rad",)
     disturbance_units: ClassVar[tuple[str, ...]] = ("rad/s^2", "rad/s^2")
-    #: The seed's measured channels: p = 4, sway speed v is not measured.
+    #: The USV observer patent's measured channels: p = 4, sway speed v is not measured.
     measured_names: ClassVar[tuple[str, ...]] = ("r", "psi", "p", "phi")
     is_linear: ClassVar[bool] = True
 
@@ -112,5 +112,5 @@ class USVModel(VehicleModel):
 
     @property
     def C(self) -> FloatArray:
-        """Output matrix of the seed's measured channels ``[r, psi, p, phi]`` (= [0 I4])."""
+        """Output matrix of the patent's measured channels ``[r, psi, p, phi]`` (= [0 I4])."""
         return np.eye(5)[[self.state_names.index(n) for n in self.measured_names]]

@@ -52,7 +52,7 @@ class USVWaveCoupling:
 
 @dataclasses.dataclass(frozen=True)
 class HydrofoilWaveCoupling:
-    """Orbital velocities and surface elevation at the hydrofoil's two foils (MODELS.md 2.5).
+    """Orbital velocities and surface elevation at the hydrofoil's two foils (docs/models.md 2.5).
 
     Deep-water linear waves **[RECALLED, standard]**, wave number ``k = omega^2/g``, foil i at
     ``x_i`` along the hull (``x_1 = +l1`` front, ``x_2 = -l2`` rear, m) and at its trim depth
@@ -67,11 +67,12 @@ class HydrofoilWaveCoupling:
     earth point, so their amplitude uses the wave frequency omega while the phase runs at the
     encounter frequency. The decay uses the fixed trim depth, not the instantaneous one.
     ``k`` uses the sea's gravity (9.81 m/s^2, as the realisation's encounter frequency does),
-    not the hydrofoil seed's 9.80: the waves belong to the sea, not to the craft.
+    not the hydrofoil AKF paper's 9.80: the waves belong to the sea, not to the craft.
 
     :param heading: encounter angle beta, rad (Fossen: pi = head seas, 0 = following seas).
-    :param rich: False (the seed's model, MODELS.md 2.4): only the ``zeta_dot`` channels, the
-        ``eta`` and ``u_w`` columns are zero. True: all six channels (the "richer truth model").
+    :param rich: False (the paper's model, docs/models.md 2.4): only the ``zeta_dot`` channels,
+        the ``eta`` and ``u_w`` columns are zero. True: all six channels (the "richer truth
+        model").
     """
 
     heading: float

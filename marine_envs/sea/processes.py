@@ -14,7 +14,6 @@ from collections.abc import Sequence
 from typing import Protocol
 
 import numpy as np
-import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from ..blocks import BLOCK, BlockStream
@@ -96,6 +95,8 @@ class GaussMarkov:
         noise[:, 0] = np.where(starting, 0.0, noise[:, 0])
         decay = self.a ** np.arange(BLOCK)[:, None]  # a**0 = 1 also for white noise (a = 0)
         block = first[:, None, :] * decay
+        import scipy.signal  # here, not at the top: importing it costs a third of a second
+
         for c in range(self.width):  # each channel has its own filter coefficient
             filtered, _ = scipy.signal.lfilter([self.gain[c]], [1.0, -self.a[c]], noise[:, :, c],
                                                axis=1, zi=self.a[c] * previous[:, c:c + 1])

@@ -34,7 +34,7 @@ __all__ = [
     "spectral_moment",
 ]
 
-PM_B_COEF = 3.11  # m^2/s^4: B = 3.11 / hs^2 in S = A w^-5 exp(-B w^-4), MODELS.md 2.5
+PM_B_COEF = 3.11  # m^2/s^4: B = 3.11 / hs^2 in S = A w^-5 exp(-B w^-4), docs/models.md 2.5
 # Peak of A w^-5 exp(-B w^-4) is at wp = (4B/5)^(1/4) = PM_WP_COEF / sqrt(hs).
 PM_WP_COEF = (4.0 * PM_B_COEF / 5.0) ** 0.25
 NDBC_EXAMPLE = "ndbc_46042_1996_jan.txt.gz"
@@ -120,7 +120,7 @@ def pierson_moskowitz(omega: ArrayLike, hs: float, tp: float | None = None) -> n
 
     ``S = 5/16 hs^2 wp^4 omega^-5 exp(-5/4 (wp/omega)^4)`` with ``wp = 2 pi / tp``; its
     ``4 sqrt(m0)`` equals ``hs`` exactly. With ``tp=None`` the one-parameter, fully developed
-    PM of MODELS.md (``A = 8.1e-3 g^2``, ``B = 3.11/hs^2``) is used through its peak
+    PM of docs/models.md 2.5 (``A = 8.1e-3 g^2``, ``B = 3.11/hs^2``) is used through its peak
     ``wp = (4B/5)^(1/4) = 1.256/sqrt(hs)``, normalised to the same ``hs``.
 
     :param omega: angular frequencies [rad/s], any shape; S = 0 where omega <= 0.

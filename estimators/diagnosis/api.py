@@ -1,0 +1,443 @@
+"""``diagnose(recording, model) -> Diagnosis``: locate, name, model and validate a mismatch.
+
+1. Check the input: parameter overrides and the names to calibrate (a ``ValueError`` naming the
+   entry, before any work); the model's channels, length, excitation, observability (a recording
+   the tool cannot judge gets ``mismatch=None`` and the reason, never a confident wrong answer).
+2. Optionally calibrate named nominal parameters first (so only what the model's *structure*
+   leaves out remains).
+3. Smooth the record with the nominal model; locate the mismatch (channels, time windows,
+   frequency band) in its multi-step prediction errors.
+4. Search the catalogue (:mod:`.hypotheses`, :mod:`.selection`) and report each supported effect
+   with its parameters, their standard deviations, a confidence and an explanation.
+5. Validate: the held-out prediction error before and after adding the findings.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import signal
+
+from marine_envs.models import VehicleModel, get_model
+from marine_envs.models.effects import Effect
+from marine_envs.recording import Recording, read_recording
+
+from .explain import explain
+from .residuals import Residuals, estimate, white_noise_std
+from .rollout import Rollouts
+from .selection import (
+    DiagnosisConfig,
+    Evaluator,
+    Fitted,
+    Scored,
+    Selection,
+    fit_findings,
+    gain_test,
+    select,
+)
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+#: Below these a recording is too short to say anything.
+MIN_SAMPLES, MIN_DURATION = 300, 60.0
+#: A channel moves "beyond its noise" when its spread exceeds this many noise deviations.
+MIN_SIGNAL_TO_NOISE = 5.0
+
+
+@dataclass
+class Finding:
+    """One effect the recording supports (the JSON's ``findings`` entries).
+
+    :param effect: catalogue name.  :param target: state, input or channel it acts on.
+    :param parameters: fitted values (SI units, the catalogue's sign convention).
+    :param std: their standard deviations.  :param confidence: in [0, 1].
+    :param improvement: held-out share of the excess prediction error this term removes alone.
+    :param explanation: what it means, in words.
+    """
+
+    effect: str
+    target: str
+    parameters: dict[str, Any]
+    std: dict[str, float]
+    confidence: float
+    improvement: float
+    explanation: str
+
+    def as_effect(self) -> Effect:
+        return Effect(self.effect, self.target, self.parameters)
+
+
+@dataclass
+class Diagnosis:
+    """The answer of :func:`diagnose`; :meth:`to_dict` is the documented JSON.
+
+    ``mismatch`` is True when a finding is claimed, False when nothing significant is found and
+    None when the recording cannot be judged (``reason`` says why).
+    """
+
+    model: str
+    mismatch: bool | None
+    reason: str = ""
+    channels: list[dict[str, Any]] = field(default_factory=list)
+    windows: list[dict[str, Any]] = field(default_factory=list)
+    band: dict[str, float] | None = None
+    findings: list[Finding] = field(default_factory=list)
+    unconfirmed: list[Finding] = field(default_factory=list)
+    fit: dict[str, Any] = field(default_factory=dict)
+    calibration: dict[str, float] = field(default_factory=dict)
+    residuals: Residuals | None = field(default=None, repr=False)
+    rollouts: Rollouts | None = field(default=None, repr=False)
+    selection: Selection | None = field(default=None, repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON document (see the issue's schema), with plain Python numbers; also
+        ``unconfirmed`` findings, the ``calibration`` and the ``noise_model`` (each force
+        equation's coloured forcing: correlation time, s, and std, state units per s)."""
+        out = {"model": self.model, "mismatch": self.mismatch, "channels": self.channels,
+               "windows": self.windows, "band": self.band,
+               "findings": [_finding_dict(f) for f in self.findings], "fit": self.fit}
+        if self.unconfirmed:
+            out["unconfirmed"] = [_finding_dict(f) for f in self.unconfirmed]
+        if self.reason:
+            out["reason"] = self.reason
+        if self.calibration:
+            out["calibration"] = self.calibration
+        if self.residuals is not None and self.residuals.forcing:
+            names = self.residuals.model.state_names
+            out["noise_model"] = [{"equation": names[f.state], "correlation_time": f.tau,
+                                   "std": math.sqrt(f.variance)}
+                                  for f in self.residuals.forcing]
+        return json.loads(json.dumps(out, default=_plain))
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        text = json.dumps(self.to_dict(), indent=2)
+        if path is not None:
+            Path(path).write_text(text + "\n")
+        return text
+
+    def summary(self) -> str:
+        """A few lines for a terminal."""
+        if self.mismatch is None:
+            return f"{self.model}: cannot diagnose: {self.reason}"
+        withdrawn = [f"  withdrawn, not confirmed on held-out data: {f.effect} on {f.target} "
+                     f"(improvement {f.improvement:.0%})" for f in self.unconfirmed]
+        if not self.mismatch:
+            return "\n".join([f"{self.model}: no significant mismatch: the nominal model "
+                              "explains the record", *withdrawn])
+        lines = [f"{self.model}: mismatch found"]
+        for k, f in enumerate(self.findings, 1):
+            values = ", ".join(f"{n}={_fmt(v)}" + (f" ± {_fmt(f.std[n])}" if n in f.std else "")
+                               for n, v in f.parameters.items())
+            lines.append(f"  {k}. {f.effect} on {f.target} ({values}), confidence "
+                         f"{f.confidence:.2f}: {f.explanation}")
+        lines.append(f"  held-out improvement: {self.fit.get('improvement', 0):.0%}")
+        return "\n".join(lines + withdrawn)
+
+
+def diagnose(recording: Recording | str | Path, model: str | VehicleModel | None = None, *,
+             params: Mapping[str, float] | str | Path | None = None,
+             calibrate: Sequence[str] | str = (), config: DiagnosisConfig | None = None,
+             log: Callable[[str], None] | None = None) -> Diagnosis:
+    """Diagnose why ``model`` and ``recording`` disagree.
+
+    :param recording: a :class:`~marine_envs.recording.Recording` or a path to one.
+    :param model: model name or object; default: the recording's metadata.
+    :param params: nominal parameter overrides (names as in docs/models.md, SI units), on top
+        of the recording's metadata: a mapping, or the path of a JSON object of them.
+    :param calibrate: nominal parameters to fit first (equation-error least squares on the
+        smoothed states), so that only what the model's structure leaves out remains; names,
+        or one comma-separated string.
+    :param config: the search's configuration (one default for every case).
+    :param log: called with a line on what the (seconds-long) search is doing.
+    :raises ValueError: invalid ``params`` or ``calibrate`` (naming the entry), or a recording
+        that is not valid for the model (naming the column); all before any work is done.
+    """
+    config = config or DiagnosisConfig()
+    overrides = read_params(params) if isinstance(params, str | Path) else _numbers(params)
+    name = model if isinstance(model, str) else (model.name if model is not None else None)
+    if name is not None:
+        get_model(name)  # an unknown name fails here, naming the known ones
+    if not isinstance(recording, Recording):
+        recording = read_recording(recording, model=name)
+    vehicle = model if isinstance(model, VehicleModel) else get_model(name or recording.model)
+    overrides = {**recording.params, **overrides}
+    vehicle = vehicle.with_params(**overrides) if overrides else vehicle
+    calibrate = _parameter_names(calibrate, vehicle)
+    problem = check(recording, vehicle)
+    if problem:
+        return Diagnosis(vehicle.name, None, problem)
+    if log is not None:
+        log(f"smoothing {len(recording.time)} samples with the nominal model and searching the "
+            "catalogue (a few seconds)...")
+    calibration: dict[str, float] = {}
+    if calibrate:
+        vehicle, calibration = _calibrate(recording, vehicle, calibrate)
+    residuals = estimate(recording, vehicle)
+    if not residuals.observable.any():
+        return Diagnosis(vehicle.name, None, "the measured channels observe no state")
+    rollouts = Rollouts(residuals, config.fit_fraction, config.horizon, config.stride)
+    wrong = _wrong_model(rollouts)
+    if wrong:
+        return Diagnosis(vehicle.name, None, wrong, calibration=calibration,
+                         residuals=residuals, rollouts=rollouts)
+    selection = select(residuals, config)
+    findings = [_finding(s, residuals) for s in selection.findings]
+    diagnosis = Diagnosis(vehicle.name, bool(findings), "", calibration=calibration,
+                          residuals=residuals, rollouts=rollouts, selection=selection,
+                          findings=findings)
+    _locate(diagnosis)
+    _validate(diagnosis, config)
+    _confirm(diagnosis, config)
+    return diagnosis
+
+
+# -- checks ---------------------------------------------------------------------------------------
+def check(recording: Recording, vehicle: VehicleModel) -> str:
+    """Why the recording cannot be diagnosed against ``vehicle``, or ``""``."""
+    if recording.model != vehicle.name:
+        return (f"the recording is of model {recording.model!r}, not {vehicle.name!r}: "
+                f"diagnose it with --model {recording.model}")
+    n, duration = len(recording.time), float(recording.time[-1] - recording.time[0])
+    if n < MIN_SAMPLES or duration < MIN_DURATION:
+        return (f"too short to say anything: {n} samples over {duration:.1f} s; need at least "
+                f"{MIN_SAMPLES} samples and {MIN_DURATION:.0f} s (30 % of it is held out)")
+    y = recording.measurements
+    noise = white_noise_std(y)
+    moving = np.std(y, axis=0) > MIN_SIGNAL_TO_NOISE * noise
+    if not moving.any():
+        return ("no excitation: no measured channel moves beyond its sensor noise "
+                f"({', '.join(recording.measured_names)}); excite the vehicle (inputs, a "
+                "release from an offset) and record again")
+    return ""
+
+
+def _wrong_model(rollouts: Rollouts) -> str:
+    """The nominal model predicts the held-out channels worse than holding the last sample:
+    it does not describe this vehicle (wrong model or wrong parameters)."""
+    predicted = rollouts.errors([])[rollouts.fit].sum()
+    held = rollouts.target - rollouts.res.y[rollouts.starts][:, None, :]
+    hold = float(np.sum(held[rollouts.fit] ** 2 * rollouts.weights))
+    if predicted > 4 * hold:
+        return (f"the model does not describe this recording: its {rollouts.steps}-step "
+                f"predictions are {math.sqrt(predicted / hold):.1f}x worse than assuming "
+                "nothing moves. Check the model name, the units and the parameters "
+                "(--params, --calibrate)")
+    return ""
+
+
+def read_params(path: str | Path) -> dict[str, float]:
+    """Nominal parameter overrides from a JSON file: one object of parameter names to numbers
+    (SI units), e.g. ``{"wn": 0.6}``.
+
+    :raises ValueError: an unreadable file, invalid JSON, or not an object of numbers.
+    """
+    try:
+        value: Any = json.loads(Path(path).read_text())
+    except OSError as error:
+        raise ValueError(f"params {path}: cannot read it: {error.strerror or error}") from None
+    except json.JSONDecodeError as error:
+        raise ValueError(f"params {path}: not valid JSON: {error}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"params {path}: must be a JSON object of parameter names to "
+                         f"numbers, e.g. {{\"wn\": 0.6}}; got {type(value).__name__}")
+    return _numbers(value, f"params {path}")
+
+
+def _numbers(params: Mapping[str, Any] | None, where: str = "params") -> dict[str, float]:
+    bad = {k: v for k, v in (params or {}).items()
+           if isinstance(v, bool) or not isinstance(v, int | float | np.floating | np.integer)}
+    if bad:
+        raise ValueError(f"{where}: parameter values must be numbers; got {bad}")
+    return {k: float(v) for k, v in (params or {}).items()}
+
+
+def _parameter_names(names: Sequence[str] | str, vehicle: VehicleModel) -> tuple[str, ...]:
+    """``calibrate`` as parameter names of ``vehicle``; :raises ValueError: an unknown one."""
+    if isinstance(names, str):
+        names = [n for n in names.split(",") if n.strip()]
+    names = tuple(n.strip() for n in names)
+    known = [f.name for f in dataclasses.fields(vehicle.params)]
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise ValueError(f"calibrate: unknown parameter(s) {unknown} for model "
+                         f"{vehicle.name!r}; known: {', '.join(known)}")
+    return names
+
+
+def _calibrate(recording: Recording, vehicle: VehicleModel,
+               names: Sequence[str]) -> tuple[VehicleModel, dict[str, float]]:
+    """Fit the named parameters by equation-error least squares (Gauss-Newton on the smoothed
+    states, two passes: the smoother is rerun with the calibrated model)."""
+    values = {n: float(getattr(vehicle.params, n)) for n in names}
+    for _ in range(2):
+        residuals = estimate(recording, vehicle)
+        x, u = residuals.midpoint, residuals.u[:-1]
+        measured = [i for i, s in enumerate(vehicle.state_names) if s in residuals.channels]
+        weights = 1 / np.maximum(np.var(residuals.error[:, measured], axis=0), 1e-300)
+        for _ in range(5):
+            base = vehicle.rhs_with(x, u, None, values)
+            columns = []
+            for n in names:
+                step = 1e-4 * max(abs(values[n]), 1e-3)
+                columns.append((vehicle.rhs_with(x, u, None, {**values, n: values[n] + step})
+                                - base)[:, measured] / step)
+            J = np.stack(columns, axis=-1) * np.sqrt(weights)[None, :, None]
+            r = (residuals.error + vehicle.rhs(x, u) - base)[:, measured] * np.sqrt(weights)
+            delta, *_ = np.linalg.lstsq(J.reshape(-1, len(names)), r.ravel(), rcond=None)
+            values = {n: values[n] + float(d) for n, d in zip(names, delta, strict=True)}
+        vehicle = vehicle.with_params(**values)
+    return vehicle, values
+
+
+# -- locate ---------------------------------------------------------------------------------------
+def _locate(diagnosis: Diagnosis) -> None:
+    """Channels ranked by their share of the excess prediction error, windows where it
+    concentrates, and the frequency band that holds most of it."""
+    ro, res = diagnosis.rollouts, diagnosis.residuals
+    assert ro is not None and res is not None
+    error = ro.nominal_error  # (S, H, m)
+    excess = np.maximum(np.mean(error**2, axis=(0, 1)) - res.noise**2, 0.0)
+    share = excess * ro.weights
+    total = share.sum()
+    ranked = sorted(zip(res.channels, share / total if total > 0 else share, strict=True),
+                    key=lambda item: -item[1])
+    diagnosis.channels = [{"name": c, "score": round(float(s), 4)} for c, s in ranked]
+    diagnosis.windows = _windows(ro, res, ranked[0][0] if total > 0 else None)
+    diagnosis.band = _band(res, ranked[0][0] if total > 0 else None)
+
+
+def _windows(ro: Rollouts, res: Residuals, channel: str | None,
+             length: float = 30.0) -> list[dict[str, Any]]:
+    """Time windows whose prediction error in ``channel`` is well above its median."""
+    if channel is None:
+        return []
+    j = res.channels.index(channel)
+    per_start = np.mean(ro.nominal_error[..., j] ** 2, axis=1)
+    times = res.time[ro.starts]
+    edges = np.arange(times[0], times[-1] + length, length)
+    level = np.array([per_start[(times >= a) & (times < a + length)].mean()
+                      if np.any((times >= a) & (times < a + length)) else 0.0 for a in edges])
+    if not np.any(level > 0):
+        return []
+    hot = level > 2 * np.median(level[level > 0])
+    return [{"start": float(a), "end": float(a + length), "channel": channel}
+            for a, h in zip(edges, hot, strict=True) if h]
+
+
+def _band(res: Residuals, channel: str | None) -> dict[str, float] | None:
+    """The frequency band (rad/s) holding the middle 80 % of the equation-error power of the
+    state behind ``channel``."""
+    if channel is None or channel not in res.model.state_names:
+        return None
+    e = res.error[:, res.model.state_names.index(channel)]
+    f, psd = signal.welch(e, fs=1 / res.dt, nperseg=min(len(e), int(60 / res.dt)))
+    cumulative = np.cumsum(psd) / max(psd.sum(), 1e-300)
+    omega = 2 * np.pi * f
+    low = omega[np.searchsorted(cumulative, 0.1)]
+    high = omega[min(np.searchsorted(cumulative, 0.9), len(omega) - 1)]
+    return {"low": round(float(low), 3), "high": round(float(high), 3)}
+
+
+# -- findings and validation ----------------------------------------------------------------------
+def _finding(scored: Scored, residuals: Residuals) -> Finding:
+    effect = scored.fitted.effect
+    return Finding(effect.effect, effect.target, dict(effect.parameters),
+                   {k: float(v) for k, v in scored.fitted.std.items()},
+                   round(float(scored.confidence), 4), round(float(scored.alone), 4),
+                   explain(effect, scored, residuals))
+
+
+def _validate(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
+    """Held-out multi-step prediction errors per channel before and after the findings, the
+    findings refitted on the first part of the record only; each term alone and all together;
+    and whether each term predicts the held-out part's innovations (:func:`_held_out_p`)."""
+    ro, selection, res = diagnosis.rollouts, diagnosis.selection, diagnosis.residuals
+    assert ro is not None and selection is not None and res is not None
+    rows = np.arange(len(res.time)) < int(ro.fit_fraction * len(res.time))
+    fitted = fit_findings(res, Evaluator(res.innovations.nu, 1), selection.findings, rows) \
+        if selection.findings else []
+    effects, forcing, shift = findings_model(res, fitted)
+    before = ro.errors([])
+    for k, (scored, term) in enumerate(zip(selection.findings, fitted, strict=True)):
+        alone = ro.errors(*findings_model(res, [term]))
+        scored.alone = round(float(ro.improvement(before, alone)), 4)
+        scored.held_out_p = _held_out_p(res, fitted, k, ~rows, config.confirm_block)
+    selection.combined_improvement = float(ro.improvement(before,
+                                                          ro.errors(effects, forcing, shift)))
+    for finding, scored in zip(diagnosis.findings, selection.findings, strict=True):
+        finding.improvement = scored.alone
+        finding.explanation = explain(scored.fitted.effect, scored, res)  # quotes it
+    diagnosis.fit = {
+        "before": {"rmse": ro.rmse([])},
+        "after": {"rmse": ro.rmse(effects, forcing, shift)},
+        "improvement": round(selection.combined_improvement, 4),
+        "validation": (f"held-out last {1 - ro.fit_fraction:.0%}, findings refitted on the "
+                       f"rest: {ro.steps}-step ({ro.steps * ro.res.dt:.1f} s) predictions from "
+                       "the smoothed state, error in excess of the sensor noise"),
+        "terms": [{"effect": s.fitted.effect.effect, "target": s.fitted.effect.target,
+                   "improvement": s.alone} for s in selection.findings],
+    }
+
+
+def _held_out_p(res: Residuals, fitted: Sequence[Fitted], k: int, held_out: BoolArray,
+                block: float) -> float:
+    """One-sided p-value that term ``k``, fitted on the first part with the others, predicts
+    the held-out part's whitened innovations (those left by the others): the search's test
+    (:func:`.diagnosis.gain_test`) on data no fit has seen, over ``block``-s blocks."""
+    nu = res.innovations.nu - sum((f.response for j, f in enumerate(fitted) if j != k),
+                                  np.zeros_like(res.innovations.nu))
+    nu = nu[held_out]
+    return gain_test(nu, nu - fitted[k].response[held_out], int(round(block / res.dt)))[1]
+
+
+def _confirm(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
+    """Withdraw the findings whose own term, refitted on the first part, does not improve the
+    held-out predictions or does not predict the held-out innovations at level ``alpha``: the
+    search's evidence was the sea's colour or the noise, not a term the data repeat. They are
+    kept under ``unconfirmed``; the rest are validated again."""
+    selection = diagnosis.selection
+    assert selection is not None
+    withdrawn = [k for k, s in enumerate(selection.findings)
+                 if s.alone <= 0 or s.held_out_p > config.alpha]
+    if not withdrawn:
+        return
+    diagnosis.unconfirmed += [diagnosis.findings[k] for k in withdrawn]
+    selection.findings = [s for k, s in enumerate(selection.findings) if k not in withdrawn]
+    diagnosis.findings = [f for k, f in enumerate(diagnosis.findings) if k not in withdrawn]
+    diagnosis.mismatch = bool(diagnosis.findings)
+    _validate(diagnosis, config)
+
+
+def findings_model(res: Residuals, fitted: Sequence[Fitted]
+           ) -> tuple[list[Effect], dict[int, FloatArray], FloatArray]:
+    """Effects, wave forcings and smoothed-state shift of fitted findings, as
+    :meth:`Rollouts.predict` takes them."""
+    forcing = {k: f.details["forcing"] for k, f in enumerate(fitted) if "forcing" in f.details}
+    shift = sum((res.innovations.smoothed_shift(f.w, f.v) for f in fitted),  # type: ignore
+                np.zeros_like(res.x))
+    return [f.effect for f in fitted], forcing, shift
+
+
+def _finding_dict(f: Finding) -> dict[str, Any]:
+    return {k: getattr(f, k) for k in ("effect", "target", "parameters", "std", "confidence",
+                                       "explanation", "improvement")}
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
+
+
+def _fmt(value: Any) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)

@@ -1,0 +1,298 @@
+"""Step 1 of a diagnosis: the state the nominal model believes, and what it cannot explain.
+
+The nominal model's extended Kalman filter and Rauch-Tung-Striebel smoother estimate every state,
+measured or not, over the whole record. Their process noise is first guessed from the data, then
+set to what the model actually fails to explain (one expectation-maximisation-like pass), so the
+smoothed states follow the recording and the model's mistakes land in the *equation errors*:
+
+    e_k = (x_{k+1} - Phi(x_k, u_k)) / dt
+
+(``Phi``: one RK4 step of the nominal model). A term the model leaves out shows up in ``e`` as a
+function of the smoothed states and inputs, which is what the hypotheses are fitted to.
+
+The unmodelled sea or wind is coloured, and under closed-loop control a coloured forcing the
+filter takes for white biases every fit of a term that the controller correlates with it (the
+direct prediction-error method is consistent only with the right noise model). So the last pass
+gives each measured force equation a first-order Gauss-Markov forcing state, its correlation
+time and variance read off the part of the first pass's equation errors that is not a function
+of the state and input (:func:`forcing_model`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import linalg, signal
+
+from marine_envs.models import VehicleModel
+from marine_envs.models.integrate import rk4
+from marine_envs.recording import Recording
+
+from ..ekf import ExtendedKalmanFilter
+from .innovations import Innovations
+
+FloatArray = NDArray[np.float64]
+#: Channels that are angles: unwrapped before smoothing.
+ANGLES = ("psi", "phi", "theta", "psi_lf")
+#: Unmeasured states get this share of their guessed process noise: they follow the model, so a
+#: model error cannot hide in them and shows in the equations of the measured states instead.
+FOLLOW_MODEL = 1e-3
+#: Share of a force equation's error variance left to white process noise once it has a
+#: Gauss-Markov forcing state, and taken from the forcing's (keeps the filter from trusting the
+#: forcing model blindly).
+WHITE_SHARE = 0.1
+
+
+@dataclass
+class Residuals:
+    """The nominal model's view of a recording.
+
+    :param time: ``(T,)`` s.  :param dt: sample period, s.
+    :param u: commanded inputs ``(T, n_u)``.  :param y: measurements ``(T, m)`` (angles unwrapped).
+    :param channels: measured channel names; ``channel_index`` their indices among the outputs.
+    :param x: smoothed states ``(T, n)``.  :param x_std: their standard deviations.
+    :param error: equation errors ``(T - 1, n)``, state units per second.
+    :param noise: white-noise standard deviation of each channel, estimated from the data.
+    :param observable: per state, whether the measured channels see it.
+    :param innovations: the last pass's filter innovations and their sensitivities.
+    :param forcing: the last pass's coloured forcing of the force equations (noise model).
+    """
+
+    model: VehicleModel
+    time: FloatArray
+    dt: float
+    u: FloatArray
+    y: FloatArray
+    channels: tuple[str, ...]
+    x: FloatArray
+    x_std: FloatArray
+    error: FloatArray
+    noise: FloatArray
+    observable: NDArray[np.bool_]
+    substeps: int = 1
+    innovations: Innovations | None = None
+    forcing: tuple[Forcing, ...] = ()
+
+    @property
+    def midpoint(self) -> FloatArray:
+        """The state halfway through each step ``(T - 1, n)``: where equation errors are
+        evaluated (a first-order-accurate match of the RK4 step)."""
+        return 0.5 * (self.x[1:] + self.x[:-1])
+
+
+def rk4_step(model: VehicleModel, x: FloatArray, u: FloatArray, dt: float,
+             substeps: int = 1) -> FloatArray:
+    """One step of ``dt`` for every row of ``x`` with inputs ``u`` held (no disturbance)."""
+    return rk4(lambda z, _t: model.rhs(z, u), x, dt / substeps, substeps)
+
+
+def substeps_for(model: VehicleModel, dt: float) -> int:
+    """RK4 steps per sample that keep the fastest mode of the linearised model accurate
+    (``|lambda| h <= 0.5``; one step of 0.1 s is unstable for the hydrofoil's 38 1/s mode)."""
+    A, _, _ = model.linearize()
+    fastest = float(np.max(np.abs(np.linalg.eigvals(A)))) if A.size else 0.0
+    return max(1, math.ceil(fastest * dt / 0.5))
+
+
+def equation_error(model: VehicleModel, x: FloatArray, u: FloatArray, dt: float,
+                   substeps: int = 1) -> FloatArray:
+    """``(x_{k+1} - Phi(x_k, u_k)) / dt``, shape ``(T - 1, n)``."""
+    return (x[1:] - rk4_step(model, x[:-1], u[:-1], dt, substeps)) / dt
+
+
+def white_noise_std(y: FloatArray) -> FloatArray:
+    """Per column, the standard deviation of white noise on a smooth signal: from the fourth
+    differences (a white sequence's have variance 70 sigma^2; a signal sampled well above its
+    bandwidth contributes almost nothing), with a robust (median) scale."""
+    d4 = np.diff(y, n=4, axis=0)
+    mad = np.median(np.abs(d4 - np.median(d4, axis=0)), axis=0) / 0.6745
+    return np.maximum(mad / np.sqrt(70.0), 1e-6 * (np.std(y, axis=0) + 1e-12))
+
+
+def displacements(model: VehicleModel) -> set[int]:
+    """The states whose equations are kinematic (nothing damps them, no input or disturbance
+    drives them): positions and angles. Only they can carry a restoring force, and their
+    equations take no force (``hypotheses``) and no sea forcing (:func:`forcing_model`)."""
+    A, B, E = model.linearize()
+    return {i for i in range(A.shape[0])
+            if A[i, i] == 0 and not B[i].any() and not E[i].any()}
+
+
+def observable_states(model: VehicleModel, channels: tuple[str, ...]) -> NDArray[np.bool_]:
+    """Per state, whether it lies in the observable subspace of the model linearised at its
+    nominal point, measured through ``channels``."""
+    A, _, _ = model.linearize()
+    C = _output_matrix(model, channels)
+    n = A.shape[0]
+    blocks, M = [], C
+    for _ in range(n):
+        blocks.append(M)
+        M = M @ A
+    observability = np.vstack(blocks)
+    scale = np.abs(observability).max(axis=1, keepdims=True) + 1e-300
+    _, s, vt = np.linalg.svd(observability / scale)
+    basis = vt[: int(np.sum(s > 1e-9 * s[0]))]
+    return np.linalg.norm(basis, axis=0) > 0.99  # unit vector e_i inside the row space
+
+
+def _output_matrix(model: VehicleModel, channels: tuple[str, ...]) -> FloatArray:
+    """``d outputs / d x`` at the nominal state for the measured channels."""
+    x0 = model.x0
+    idx = [model.output_names.index(c) for c in channels]
+    eps = 1e-6 * np.maximum(1.0, np.abs(x0))
+    C = np.empty((len(idx), x0.size))
+    for j in range(x0.size):
+        step = np.zeros_like(x0)
+        step[j] = eps[j]
+        C[:, j] = (model.output(x0 + step)[idx] - model.output(x0 - step)[idx]) / (2 * eps[j])
+    return C
+
+
+def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Residuals:
+    """Smooth the record with the nominal model and compute the equation errors.
+
+    The process noise of each later pass is fitted to the previous pass's equation errors, so
+    the smoother follows the data wherever the model is wrong; the last pass models the
+    forcing of the measured force equations as coloured (module doc).
+    """
+    channels = recording.measured_names
+    y = recording.measurements.copy()
+    for j, name in enumerate(channels):
+        if name in ANGLES:
+            y[:, j] = np.unwrap(y[:, j])
+    u, dt = recording.inputs, recording.dt
+    noise = white_noise_std(y)
+    n = len(model.state_names)
+    substeps = substeps_for(model, dt)
+    measured = np.array([name in channels for name in model.state_names])
+    q = _initial_process_noise(model, y, u, channels, dt)
+    q = np.where(measured, q, q * FOLLOW_MODEL)
+    x0, P0 = _initial_state(model, y, channels, noise)
+    forcing: list[Forcing] = []
+    for k in range(passes):
+        ekf = _filter(model, dt, channels, q, noise, x0, P0, substeps, forcing)
+        smoothed = ekf.smooth(u, y)
+        x = smoothed.x[:, 0, :n]
+        error = equation_error(model, x, u, dt, substeps)
+        if k == passes - 1:
+            break
+        variance = np.maximum(np.var(error, axis=0), 1e-12 * (np.var(x, axis=0) + 1e-12))
+        q = np.where(measured, variance * dt**2, q * FOLLOW_MODEL)
+        if k == passes - 2:
+            forcing = forcing_model(model, x, u, error, measured, dt)
+            for f in forcing:
+                q[f.state] *= WHITE_SHARE
+    return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
+                     error, noise, observable_states(model, channels), substeps,
+                     Innovations.from_filter(ekf, smoothed.filtered, dt, n), tuple(forcing))
+
+
+@dataclass(frozen=True)
+class Forcing:
+    """A first-order Gauss-Markov forcing in state ``state``'s equation:
+    ``zeta' = -zeta / tau + white``, stationary ``variance`` (state units per s, squared)."""
+
+    state: int
+    tau: float
+    variance: float
+
+
+def forcing_model(model: VehicleModel, x: FloatArray, u: FloatArray, error: FloatArray,
+                  measured: NDArray[np.bool_], dt: float) -> list[Forcing]:
+    """A Gauss-Markov forcing for each measured force equation (not the kinematics), fitted to
+    what of its equation error is not a function of the present state and input (a missing
+    term is; it must stay a model error, not become forcing): its variance, and its
+    correlation time ``1 / omega_c`` where its spectrum falls to half its peak (a sea's
+    forcing is low-pass)."""
+    regressors = _state_functions(x[:-1], u[:-1])
+    exogenous = error - regressors @ np.linalg.lstsq(regressors, error, rcond=None)[0]
+    kinematic = displacements(model)
+    out = []
+    for i in np.flatnonzero(measured):
+        if i in kinematic:
+            continue  # nothing forces a kinematic equation
+        e = exogenous[:, i]
+        f, psd = signal.welch(e, fs=1 / dt, nperseg=max(len(e) // 4, 8))
+        omega, level = 2 * np.pi * f[1:], psd[1:]
+        peak = int(np.argmax(level))
+        below = np.flatnonzero(level[peak:] < level[peak] / 2)
+        corner = omega[peak + below[0]] if below.size else omega[-1]
+        out.append(Forcing(int(i), float(1 / corner), float((1 - WHITE_SHARE) * np.var(e))))
+    return out
+
+
+def _state_functions(x: FloatArray, u: FloatArray) -> FloatArray:
+    """Regressors ``(T, k)``: a constant, and each state and input, its ``|.| .`` and cube
+    (scaled to unit spread so that the least squares is well conditioned)."""
+    z = np.concatenate([x, u], axis=1)
+    z = (z - z.mean(axis=0)) / np.maximum(z.std(axis=0), 1e-12)
+    return np.concatenate([np.ones((len(z), 1)), z, z * np.abs(z), z**3], axis=1)
+
+
+def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatArray,
+            noise: FloatArray, x0: FloatArray, P0: FloatArray, substeps: int,
+            forcing: Sequence[Forcing]) -> ExtendedKalmanFilter:
+    """The nominal model's filter with per-step process noise ``q`` on the states and, after
+    them, the ``forcing`` states (zero mean, their stationary variance as prior)."""
+    if not forcing:
+        return ExtendedKalmanFilter.from_model(model, dt, measured=channels, Q=np.diag(q),
+                                               R=np.diag(noise**2), x0=x0, P0=P0,
+                                               substeps=substeps)
+    n = len(model.state_names)
+    rows = np.array([f.state for f in forcing])
+    tau = np.array([f.tau for f in forcing])
+    variance = np.array([f.variance for f in forcing])
+    outputs = [model.output_names.index(c) for c in channels]
+
+    def f(z: FloatArray, u: FloatArray, _theta: FloatArray) -> FloatArray:
+        x_dot = model.rhs(z[:, :n], u)
+        x_dot[:, rows] += z[:, n:]
+        return np.concatenate([x_dot, -z[:, n:] / tau], axis=1)
+
+    def h(z: FloatArray) -> FloatArray:
+        return model.output(z[:, :n])[:, outputs]
+
+    decay = np.exp(-2 * dt / tau)
+    Q = np.diag(np.concatenate([q, variance * (1 - decay)]))
+    names = [f"forcing_{model.state_names[i]}" for i in rows]
+    return ExtendedKalmanFilter(f, h, dt=dt, Q=Q, R=np.diag(noise**2), n_inputs=len(
+        model.input_names), state_names=(*model.state_names, *names), measurement_names=channels,
+        x0=np.concatenate([x0, np.zeros(len(rows))]),
+        P0=linalg.block_diag(P0, np.diag(variance)), substeps=substeps)
+
+
+def _initial_state(model: VehicleModel, y: FloatArray, channels: tuple[str, ...],
+                   noise: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The nominal state with measured states set to the first samples; a wide prior."""
+    x0 = model.x0.copy()
+    spread = np.ones_like(x0)
+    for j, name in enumerate(channels):
+        if name in model.state_names:
+            i = model.state_names.index(name)
+            x0[i] = y[0, j]
+            spread[i] = 10 * noise[j] + 1e-6
+    scale = np.maximum(np.abs(x0), 1.0)
+    for i, name in enumerate(model.state_names):
+        if name not in channels:
+            spread[i] = scale[i]
+    return x0, np.diag(spread**2)
+
+
+def _initial_process_noise(model: VehicleModel, y: FloatArray, u: FloatArray,
+                           channels: tuple[str, ...], dt: float) -> FloatArray:
+    """A first guess of the per-step process noise variance of each state: a tenth of the
+    spread of its derivative along a crude trajectory (measured states from the smoothed data,
+    the others at their nominal values)."""
+    window = min(len(y) // 2 * 2 - 1, 2 * int(1.0 / dt) + 1)
+    smooth = signal.savgol_filter(y, max(window, 5), 3, axis=0) if len(y) > 5 else y
+    crude = np.tile(model.x0, (len(y), 1))
+    for j, name in enumerate(channels):
+        if name in model.state_names:
+            crude[:, model.state_names.index(name)] = smooth[:, j]
+    rates = np.std(model.rhs(crude, u), axis=0)
+    floor = 1e-6 * (np.abs(model.x0) + 1.0)
+    return (np.maximum(0.1 * rates, floor) * dt) ** 2

@@ -1,0 +1,107 @@
+"""Multi-step predictions: the test every hypothesis must finally pass.
+
+From the smoothed state at many start times, the model (with the hypothesised effects) predicts
+the measured channels a few seconds ahead with the recorded inputs. A missing term accumulates
+over the horizon while sensor noise does not, and a term in an unmeasured state's equation shows
+in the channels it drives, so these predictions both fit the candidates' parameters (free of the
+smoothing bias of the equation errors) and score them on held-out start times.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from marine_envs.models.effects import Effect, EffectModel
+from marine_envs.models.integrate import rk4
+
+from .residuals import Residuals
+
+FloatArray = NDArray[np.float64]
+
+
+class Rollouts:
+    """Predictions ``horizon`` seconds ahead from start times every ``stride`` seconds.
+
+    :param residuals: the nominal model's smoothed states and the data.
+    :param fit_fraction: starts whose horizon ends in the first part fit; the others validate.
+    :param horizon: prediction horizon, s.  :param stride: time between starts, s.
+    """
+
+    def __init__(self, residuals: Residuals, fit_fraction: float, horizon: float = 3.0,
+                 stride: float = 0.5) -> None:
+        self.res, self.fit_fraction = residuals, fit_fraction
+        dt, T = residuals.dt, len(residuals.time)
+        self.steps = max(2, int(round(horizon / dt)))
+        starts = np.arange(0, T - self.steps - 1, max(1, int(round(stride / dt))))
+        boundary = int(fit_fraction * T)
+        self.fit = starts + self.steps < boundary
+        self.held = starts >= boundary
+        self.starts = starts
+        model = residuals.model
+        self.channel_index = [model.output_names.index(c) for c in residuals.channels]
+        self._outputs_are_states = model.output_names == model.state_names
+        self.target = residuals.y[starts[:, None] + np.arange(1, self.steps + 1)]  # (S, H, m)
+        nominal = self.predict([])
+        self.weights = 1 / np.maximum(np.var((self.target - nominal)[self.fit], axis=(0, 1)),
+                                      1e-300)
+        self.nominal_error = self.target - nominal
+        # what no model can remove: the sensor noise in the predicted samples, per start
+        self.noise_floor = self.steps * float(np.sum(self.weights * residuals.noise**2))
+
+    def predict(self, effects: Sequence[Effect],
+                forcing: Mapping[int, FloatArray] | None = None,
+                shift: FloatArray | None = None) -> FloatArray:
+        """Predicted channels ``(S, H, m)`` of the model with ``effects``; ``forcing`` maps the
+        index of a ``wave_frequency`` effect to its process ``(T,)`` (equation units);
+        ``shift`` ``(T, n)`` moves the smoothed states to where the smoother of the model with
+        the effects would have put them (the nominal smoother bent them to fit the data)."""
+        with np.errstate(over="ignore", invalid="ignore"):  # a wild trial value may overflow
+            return self._predict(effects, forcing, shift)
+
+    def _predict(self, effects: Sequence[Effect], forcing: Mapping[int, FloatArray] | None,
+                 shift: FloatArray | None) -> FloatArray:
+        res, model = self.res, self.res.model
+        truth = EffectModel(model, effects)
+        u = truth.applied_inputs(res.u, res.dt)
+        x = res.x[self.starts] + (0.0 if shift is None else shift[self.starts])
+        out = np.empty((len(self.starts), self.steps, len(res.channels)))
+        h = res.dt / res.substeps
+        for j in range(self.steps):
+            k = self.starts + j
+            w = {i: f[k] for i, f in (forcing or {}).items()}
+            uk = u[k]
+            def f(z, s, uk=uk, w=w):
+                return truth.rhs(z, uk, None, s, w)
+
+            for m in range(res.substeps):
+                x = rk4(f, x, h, t=res.time[k] + m * h)
+            outputs = x if self._outputs_are_states else model.output(x)
+            out[:, j] = truth.measure(outputs[:, self.channel_index], res.channels)
+        return np.nan_to_num(out, nan=1e6, posinf=1e6, neginf=-1e6)
+
+    def errors(self, effects: Sequence[Effect],
+               forcing: Mapping[int, FloatArray] | None = None,
+               shift: FloatArray | None = None) -> FloatArray:
+        """Weighted squared prediction error per start ``(S,)``."""
+        with np.errstate(over="ignore", invalid="ignore"):  # a wild trial value may overflow
+            r = self.target - self.predict(effects, forcing, shift)
+            return np.minimum(np.sum(r * r * self.weights, axis=(1, 2)), 1e30)
+
+    def improvement(self, before: FloatArray, after: FloatArray) -> float:
+        """The share of the held-out error in excess of the sensor noise that ``after`` removes
+        (per-start weighted errors as from :meth:`errors`)."""
+        floor = self.noise_floor * int(self.held.sum())
+        b, a = float(before[self.held].sum()), float(after[self.held].sum())
+        excess = max(b - floor, 0.05 * b)
+        return min((b - a) / excess, 1.0) if excess > 0 else 0.0
+
+    def rmse(self, effects: Sequence[Effect], forcing: Mapping[int, FloatArray] | None = None,
+             shift: FloatArray | None = None, held: bool = True) -> dict[str, float]:
+        """Root-mean-square prediction error per channel over the held-out (or fit) starts."""
+        rows = self.held if held else self.fit
+        r = (self.target - self.predict(effects, forcing, shift))[rows]
+        return {c: float(np.sqrt(np.mean(r[..., j] ** 2)))
+                for j, c in enumerate(self.res.channels)}

@@ -1,0 +1,41 @@
+"""The diagnosis's noise model: the sea as coloured forcing, and the tests that keep a chance
+fluctuation from becoming a finding."""
+
+import numpy as np
+import pytest
+
+from estimators.diagnosis.hypotheses import _in_both_halves
+from estimators.diagnosis.residuals import estimate
+from estimators.diagnosis.synthetic import SEA, synthesize, typical_effect
+from marine_envs.models import get_model
+
+
+def _forcing(residuals, state):
+    names = residuals.model.state_names
+    return next(f for f in residuals.forcing if names[f.state] == state)
+
+
+def test_the_sea_is_modelled_with_its_own_correlation_time():
+    model = get_model("usv")
+    residuals = estimate(synthesize(model, seed=102, noise=0.05), model)
+    true_tau = SEA["usv"][1]  # the generator's wave moments: Gauss-Markov, 2 s
+    assert _forcing(residuals, "r").tau == pytest.approx(true_tau, rel=0.5)
+    assert {model.state_names[f.state] for f in residuals.forcing} == {"r", "p"}  # measured
+
+
+def test_a_missing_term_stays_a_model_error_not_forcing():
+    model = get_model("usv")
+    effect = typical_effect("usv", "quadratic_damping", "r", strength=0.5)
+    residuals = estimate(synthesize(model, [effect], seed=1, noise=0.0, sea=0.0), model)
+    error_variance = np.var(residuals.error[:, model.state_names.index("r")])
+    assert _forcing(residuals, "r").variance < 0.1 * error_variance
+
+
+def test_a_wave_must_persist_through_the_record():
+    rng = np.random.default_rng(4)
+    t = np.arange(3000) * 0.1
+    line = np.sin(1.2 * t)
+    noise = rng.standard_normal(t.size)
+    assert _in_both_halves(noise + line, 1.2, 0.1, 1e-4)
+    assert not _in_both_halves(noise + np.where(t < 150, line, 0.0), 1.2, 0.1, 1e-4)
+    assert not _in_both_halves(noise, 1.2, 0.1, 1e-4)
