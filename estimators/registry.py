@@ -57,7 +57,7 @@ def make(name: str, env: Any) -> Estimator:
     :raises ValueError: an unknown name (listing the known ones) or one that does not apply.
     """
     if name not in ESTIMATORS:
-        raise ValueError(f"estimator={name!r} is unknown: one of {tuple(ESTIMATORS)}")
+        raise ValueError(f"estimator={name!r} is unknown: one of {names()}")
     return ESTIMATORS[name](env)
 
 
@@ -71,8 +71,6 @@ def observe(env: Any, name: str) -> Any:
         return TrueStateWrapper(env)
     if name == RAW:
         return env
-    if name not in ESTIMATORS:
-        raise ValueError(f"estimator={name!r} is unknown: one of {names()}")
     return wrap(env, make(name, env))
 
 

@@ -240,8 +240,7 @@ def test_each_vector_twin_is_made_by_the_one_factory_and_exported(env_id):
 def test_task_weights_are_the_environments_cost():
     for model, env_id in (("usv", "USV"), ("rov", "ROV"), ("dp_vessel", "DPVessel")):
         q, r = task_weights(model)
-        task = gym.make(f"marine_envs/{env_id}-v0").unwrapped.sim.task
-        names = gym.make(f"marine_envs/{env_id}-v0").unwrapped.model.state_names
-        np.testing.assert_array_equal(task.q, [q.get(n, 0.0) for n in names])
+        sim = gym.make(f"marine_envs/{env_id}-v0").unwrapped.sim
+        np.testing.assert_array_equal(sim.task.q, [q.get(n, 0.0) for n in sim.model.state_names])
     with pytest.raises(ValueError, match="has no environment"):
         task_weights("nomoto")

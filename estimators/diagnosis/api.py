@@ -14,7 +14,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -162,12 +161,11 @@ def diagnose(recording: Recording | str | Path, model: str | VehicleModel | None
     """
     config = config or DiagnosisConfig()
     overrides = read_params(params) if isinstance(params, str | Path) else _numbers(params)
-    name = model if isinstance(model, str) else (model.name if model is not None else None)
-    if name is not None:
-        get_model(name)  # an unknown name fails here, naming the known ones
+    # an unknown model name fails here, naming the known ones, before the recording is read
+    vehicle = get_model(model) if isinstance(model, str) else model
     if not isinstance(recording, Recording):
-        recording = read_recording(recording, model=name)
-    vehicle = model if isinstance(model, VehicleModel) else get_model(name or recording.model)
+        recording = read_recording(recording, model=None if vehicle is None else vehicle.name)
+    vehicle = get_model(recording.model) if vehicle is None else vehicle
     overrides = {**recording.params, **overrides}
     vehicle = vehicle.with_params(**overrides) if overrides else vehicle
     calibrate = _parameter_names(calibrate, vehicle)
@@ -262,14 +260,11 @@ def _numbers(params: Mapping[str, Any] | None, where: str = "params") -> dict[st
 def _parameter_names(names: Sequence[str] | str, vehicle: VehicleModel) -> tuple[str, ...]:
     """``calibrate`` as parameter names of ``vehicle``; :raises ValueError: an unknown one."""
     if isinstance(names, str):
-        names = [n for n in names.split(",") if n.strip()]
-    names = tuple(n.strip() for n in names)
-    known = [f.name for f in dataclasses.fields(vehicle.params)]
-    unknown = [n for n in names if n not in known]
-    if unknown:
-        raise ValueError(f"calibrate: unknown parameter(s) {unknown} for model "
-                         f"{vehicle.name!r}; known: {', '.join(known)}")
-    return names
+        names = names.split(",")
+    try:
+        return vehicle.check_parameter_names(n.strip() for n in names if n.strip())
+    except ValueError as error:
+        raise ValueError(f"calibrate: {error}") from None
 
 
 def _calibrate(recording: Recording, vehicle: VehicleModel,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any, ClassVar
 
 import numpy as np
@@ -119,13 +119,14 @@ class VehicleModel(ABC):
         """
         if not params:
             return self.rhs(x, u, d)
+        self.check_parameter_names(params)
         x, u, d = self._split(x, u, d)
         shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], d.shape[:-1],
                                     *(np.shape(v) for v in params.values()))
         flat = [np.broadcast_to(a, (*shape, a.shape[-1])).reshape(-1, a.shape[-1])
                 for a in (x, u, d)]
         values = {k: np.broadcast_to(np.asarray(v, dtype=float), shape).ravel()
-                  for k, v in self._known(params).items()}
+                  for k, v in params.items()}
         other = [k for k in values if k not in self.affine_parameters]
         if not other:
             return self._rhs_affine(*flat, values).reshape(*shape, -1)
@@ -145,7 +146,7 @@ class VehicleModel(ABC):
         ``params``, exact; or None when the model has no exact form (estimators then take
         differences of :meth:`rhs_with`). Here: exact when every name is in
         :attr:`affine_parameters` (one ``rhs`` call each)."""
-        self._known(params)
+        self.check_parameter_names(params)
         if not params or not set(params) <= self.affine_parameters:
             return None
         x, u, d = self._split(x, u, d)
@@ -156,13 +157,18 @@ class VehicleModel(ABC):
             columns.append((self._unit_step(name, step).rhs(x, u, d) - nominal) / step)
         return np.stack(columns, axis=-1)
 
-    def _known(self, params: Mapping[str, ArrayLike]) -> Mapping[str, ArrayLike]:
-        names = {f.name for f in dataclasses.fields(self.params)}
-        unknown = sorted(set(params) - names)
+    def check_parameter_names(self, names: Iterable[str]) -> tuple[str, ...]:
+        """``names`` as a tuple, each a field of :attr:`params`.
+
+        :raises ValueError: an unknown name, listing the known ones.
+        """
+        names = tuple(names)
+        known = [f.name for f in dataclasses.fields(self.params)]
+        unknown = sorted(set(names) - set(known))
         if unknown:
             raise ValueError(f"unknown parameter(s) {unknown} for model {self.name!r}; "
-                             f"known: {', '.join(sorted(names))}")
-        return params
+                             f"known: {', '.join(known)}")
+        return names
 
     def _rhs_affine(self, x: FloatArray, u: FloatArray, d: FloatArray,
                     values: Mapping[str, FloatArray]) -> FloatArray:
@@ -186,11 +192,7 @@ class VehicleModel(ABC):
     def with_params(self, **changes: float) -> VehicleModel:
         """A copy of this model with some parameters replaced (validated; names as in
         docs/models.md)."""
-        unknown = set(changes) - {f.name for f in dataclasses.fields(self.params)}
-        if unknown:
-            known = ", ".join(f.name for f in dataclasses.fields(self.params))
-            raise ValueError(f"unknown parameter(s) {sorted(unknown)} for model {self.name!r}; "
-                             f"known: {known}")
+        self.check_parameter_names(changes)
         return type(self)(dataclasses.replace(self.params, **changes))
 
     def _split(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None):
