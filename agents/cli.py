@@ -19,13 +19,25 @@ Angles on the command line are in degrees; everything inside (and in recordings)
 """
 
 DIAGNOSE_DESCRIPTION = """\
-Diagnose why a vehicle model and a recording of the vehicle disagree. The nominal model's
-Kalman smoother estimates every state; its multi-step prediction errors locate the mismatch
-(channels, time windows, frequency band); every catalogue term is fitted to what the model
-cannot explain and kept only if it improves the predictions of the held-out last 30 % of the
-record significantly. Prints a summary and the channel ranking; exit code 0 whether or not a
-mismatch is found (or the record is too short or unexcited to judge: the reason is printed),
-2 on invalid input.
+Diagnose why a vehicle model and recordings of the vehicle disagree. Prints a summary and the
+channel ranking; exit code 0 whether or not a mismatch is found (or the record is too short or
+unexcited to judge: the reason is printed), 2 on invalid input.
+
+two ways to judge (--method; auto picks free simulation for a series or a free decay, the
+innovations otherwise):
+  free          model tests (decays, zigzags, lab runs): the model is simulated freely over
+                each whole record. --calibrate fits the named parameters by output error (from
+                the record's own natural frequency and damping when it is a decay), with
+                standard errors and an identifiability verdict; nested models (each candidate
+                refitted with the calibrated parameters and the linear term it extends) are
+                compared on held-out data: the last 30 % of one record, or each record of a
+                series predicted by the model fitted on the others. Several recordings are one
+                series: one parameter set, each its own initial state.
+  innovations   records in a seaway: the nominal model's Kalman smoother estimates every
+                state; its multi-step prediction errors locate the mismatch (channels, time
+                windows, frequency band); every catalogue term is fitted to what the model
+                cannot explain and kept only if it improves the predictions of the held-out
+                last 30 % of the record significantly.
 
 catalogue (what a model may leave out):
   state terms   current, linear_damping, quadratic_damping, nonlinear_damping, coupling,
@@ -40,8 +52,12 @@ the JSON (--json, or diagnosis.json in --report):
   channels [{name, score}] ranked by share of the excess prediction error,
   windows [{start, end, channel}] (s), band {low, high} (rad/s) or null,
   findings [{effect, target, parameters, std, confidence, improvement, explanation}],
-  fit {before: {rmse}, after: {rmse}, improvement, validation, terms} (held-out, SI units),
-  calibration (with --calibrate)
+  fit {method, before: {rmse}, after: {rmse}, improvement, validation, terms} (held-out, SI
+  units), calibration (with --calibrate); free simulation adds calibration_quality {converged,
+  parameters {name: {value, std, status}}, correlations}, model_check (the record's natural
+  frequency and damping against the model's modes), unexplained {channel: {rmse,
+  share_of_signal}}, alternatives (terms the data cannot tell apart, and the test that would),
+  and each finding's standard_form (B1 B2 B3 damping, C1 C3 restoring, per unit inertia)
 """
 
 
@@ -153,23 +169,30 @@ def _envs(args: argparse.Namespace) -> int:
 def _diagnose(args: argparse.Namespace) -> int:
     from estimators.diagnosis import diagnose
 
-    diagnosis = diagnose(args.recording, args.model, params=args.params,
-                         calibrate=args.calibrate or (),
+    recordings = args.recording if len(args.recording) > 1 else args.recording[0]
+    diagnosis = diagnose(recordings, args.model, params=args.params,
+                         calibrate=args.calibrate or (), method=args.method,
                          log=lambda line: print(f"marine diagnose: {line}", file=sys.stderr))
     print(diagnosis.summary())
     if diagnosis.mismatch is False and diagnosis.reason:
         print(f"  reason: {diagnosis.reason}")
     if diagnosis.channels:
-        print("channels (share of the prediction error beyond sensor noise):")
-        for channel in diagnosis.channels:
-            print(f"  {channel['name']:<12}{channel['score']:>8.1%}")
+        if "score" in diagnosis.channels[0]:
+            print("channels (share of the prediction error beyond sensor noise):")
+            for channel in diagnosis.channels:
+                print(f"  {channel['name']:<12}{channel['score']:>8.1%}")
+        else:
+            print("channels (held-out free-simulation RMS error of the nominal model, SI):")
+            for channel in diagnosis.channels:
+                print(f"  {channel['name']:<12}{channel['rmse']:>12.4g}")
     if args.json:
         diagnosis.to_json(args.json)
         print(f"diagnosis written to {args.json}")
     if args.report:
         from estimators.diagnosis.report import write_report
 
-        path = write_report(diagnosis, args.report, Path(args.recording).name)
+        path = write_report(diagnosis, args.report,
+                            ", ".join(Path(r).name for r in args.recording))
         print(f"report written to {path}")
     return 0
 
@@ -332,8 +355,9 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose = commands.add_parser(
         "diagnose", help="find why a model and a recording disagree: which physics it lacks",
         description=DIAGNOSE_DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
-    diagnose.add_argument("recording", help="recording file (.csv with its .json sidecar, or "
-                                            ".parquet), as written by 'marine simulate'")
+    diagnose.add_argument("recording", nargs="+",
+                          help="recording file(s) (.csv with its .json sidecar, or .parquet), "
+                               "as written by 'marine simulate'; several: one series")
     diagnose.add_argument("--model", help="model name (default: the recording's metadata)")
     diagnose.add_argument("--params", metavar="FILE",
                           help='JSON object of nominal parameter overrides (names as in '
@@ -342,6 +366,9 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose.add_argument("--calibrate", metavar="P1,P2,...",
                           help="nominal parameters to fit first (comma-separated), so that "
                                "only what the model's structure leaves out remains")
+    diagnose.add_argument("--method", choices=("auto", "free", "innovations"), default="auto",
+                          help="free simulation (model tests) or filter innovations (seaway "
+                               "records); default: auto (see above)")
     diagnose.add_argument("--json", metavar="OUT", help="write the diagnosis as JSON")
     diagnose.add_argument("--report", metavar="DIR",
                           help="write report.md, its PNG figures and diagnosis.json into DIR")

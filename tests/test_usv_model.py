@@ -101,7 +101,8 @@ def test_get_model_names_and_errors():
     assert isinstance(get_model("usv"), USVModel)
     with pytest.raises(ValueError, match="unknown model 'ship'"):
         get_model("ship")
-    assert set(model_names()) == {"usv", "hydrofoil", "rov", "dp_vessel", "hovercraft"}
+    assert set(model_names()) == {"usv", "hydrofoil", "rov", "dp_vessel", "hovercraft",
+                                 "nomoto"}
 
 
 def test_rhs_rejects_wrong_shapes():

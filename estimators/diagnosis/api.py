@@ -47,6 +47,8 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 #: Below these a recording is too short to say anything.
 MIN_SAMPLES, MIN_DURATION = 300, 60.0
+#: How a recording is judged (see :func:`diagnose`).
+METHODS = ("auto", "free", "innovations")
 #: A channel moves "beyond its noise" when its spread exceeds this many noise deviations.
 MIN_SIGNAL_TO_NOISE = 5.0
 
@@ -69,6 +71,7 @@ class Finding:
     confidence: float
     improvement: float
     explanation: str
+    standard_form: dict[str, float] = field(default_factory=dict)
 
     def as_effect(self) -> Effect:
         return Effect(self.effect, self.target, self.parameters)
@@ -92,9 +95,14 @@ class Diagnosis:
     unconfirmed: list[Finding] = field(default_factory=list)
     fit: dict[str, Any] = field(default_factory=dict)
     calibration: dict[str, float] = field(default_factory=dict)
+    model_check: dict[str, Any] = field(default_factory=dict)
+    calibration_quality: dict[str, Any] = field(default_factory=dict)
+    unexplained: dict[str, Any] = field(default_factory=dict)
+    alternatives: list[dict[str, Any]] = field(default_factory=list)
     residuals: Residuals | None = field(default=None, repr=False)
     rollouts: Rollouts | None = field(default=None, repr=False)
     selection: Selection | None = field(default=None, repr=False)
+    comparison: Any = field(default=None, repr=False)  # .comparison.Comparison (model tests)
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (see the issue's schema), with plain Python numbers; also
@@ -109,6 +117,9 @@ class Diagnosis:
             out["reason"] = self.reason
         if self.calibration:
             out["calibration"] = self.calibration
+        for key in ("calibration_quality", "model_check", "unexplained", "alternatives"):
+            if getattr(self, key):
+                out[key] = getattr(self, key)
         if self.residuals is not None and self.residuals.forcing:
             names = self.residuals.model.state_names
             out["noise_model"] = [{"equation": names[f.state], "correlation_time": f.tau,
@@ -128,47 +139,83 @@ class Diagnosis:
             return f"{self.model}: cannot diagnose: {self.reason}"
         withdrawn = [f"  withdrawn, not confirmed on held-out data: {f.effect} on {f.target} "
                      f"(improvement {f.improvement:.0%})" for f in self.unconfirmed]
+        lines = [f"  calibrated {n} = {_fmt(q['value'])}"
+                 + (f" ± {_fmt(q['std'])}" if "std" in q else "") + f": {q['status']}"
+                 for n, q in self.calibration_quality.get("parameters", {}).items()]
+        lines += [f"  {' and '.join(c['parameters'])}: correlation {c['correlation']:+.3f}, "
+                  f"{c['status']}" for c in self.calibration_quality.get("correlations", [])]
         if not self.mismatch:
             return "\n".join([f"{self.model}: no significant mismatch: the nominal model "
-                              "explains the record", *withdrawn])
-        lines = [f"{self.model}: mismatch found"]
+                              "explains the record", *lines, *withdrawn])
+        lines.insert(0, f"{self.model}: mismatch found" if self.findings else
+                     f"{self.model}: mismatch, unexplained by the catalogue")
         for k, f in enumerate(self.findings, 1):
             values = ", ".join(f"{n}={_fmt(v)}" + (f" ± {_fmt(f.std[n])}" if n in f.std else "")
                                for n, v in f.parameters.items())
             lines.append(f"  {k}. {f.effect} on {f.target} ({values}), confidence "
                          f"{f.confidence:.2f}: {f.explanation}")
-        lines.append(f"  held-out improvement: {self.fit.get('improvement', 0):.0%}")
+        improvement = self.fit.get("improvement", 0)
+        if self.findings:
+            lines.append("  held-out improvement: " + (improvement if isinstance(
+                improvement, str) else f"{improvement:.0%}"))
+        for channel, left in self.unexplained.items():
+            lines.append(f"  unexplained in {channel}: {_with_unit(left['rmse'], left['unit'])}"
+                         f" RMS held-out ({left['share_of_signal']:.0%} of the signal)")
+        for alt in self.alternatives:
+            lines.append(f"  {alt['equally']} explains the data as well as {alt['chosen']}; "
+                         f"to separate them: {alt['separate_by']}")
         return "\n".join(lines + withdrawn)
 
 
-def diagnose(recording: Recording | str | Path, model: str | VehicleModel | None = None, *,
+def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path],
+             model: str | VehicleModel | None = None, *,
              params: Mapping[str, float] | str | Path | None = None,
              calibrate: Sequence[str] | str = (), config: DiagnosisConfig | None = None,
-             log: Callable[[str], None] | None = None) -> Diagnosis:
-    """Diagnose why ``model`` and ``recording`` disagree.
+             method: str = "auto", log: Callable[[str], None] | None = None) -> Diagnosis:
+    """Diagnose why ``model`` and a recording (or a series of recordings) disagree.
 
-    :param recording: a :class:`~marine_envs.recording.Recording` or a path to one.
-    :param model: model name or object; default: the recording's metadata.
+    :param recording: a :class:`~marine_envs.recording.Recording` or a path to one, or a
+        sequence of them: a series of tests of one vehicle (one parameter set for all).
+    :param model: model name or object; default: the (first) recording's metadata.
     :param params: nominal parameter overrides (names as in docs/models.md, SI units), on top
         of the recording's metadata: a mapping, or the path of a JSON object of them.
-    :param calibrate: nominal parameters to fit first (equation-error least squares on the
-        smoothed states), so that only what the model's structure leaves out remains; names,
-        or one comma-separated string.
-    :param config: the search's configuration (one default for every case).
+    :param calibrate: nominal parameters to fit first, so that only what the model's
+        *structure* leaves out remains; names, or one comma-separated string.
+    :param config: the sea-record search's configuration (one default for every case).
+    :param method: ``"free"``: judge in free simulation (model tests: decays, zigzags, lab
+        runs; :mod:`.model_test`); ``"innovations"``: the smoother and filter innovations of
+        a record in a seaway; ``"auto"``: free simulation for a series, a free decay (inputs
+        held) or a record too short for the innovations, the innovations otherwise.
     :param log: called with a line on what the (seconds-long) search is doing.
-    :raises ValueError: invalid ``params`` or ``calibrate`` (naming the entry), or a recording
-        that is not valid for the model (naming the column); all before any work is done.
+    :raises ValueError: invalid ``params``, ``calibrate`` or ``method`` (naming the entry), or a
+        recording that is not valid for the model (naming the column); all before any work.
     """
+    if method not in METHODS:
+        raise ValueError(f"method={method!r}: must be one of {', '.join(METHODS)}")
     config = config or DiagnosisConfig()
     overrides = read_params(params) if isinstance(params, str | Path) else _numbers(params)
     # an unknown model name fails here, naming the known ones, before the recording is read
     vehicle = get_model(model) if isinstance(model, str) else model
-    if not isinstance(recording, Recording):
-        recording = read_recording(recording, model=None if vehicle is None else vehicle.name)
-    vehicle = get_model(recording.model) if vehicle is None else vehicle
-    overrides = {**recording.params, **overrides}
+    sources = [recording] if isinstance(recording, Recording | str | Path) else list(recording)
+    if not sources:
+        raise ValueError("no recording given")
+    recordings = [r if isinstance(r, Recording) else _named(read_recording(
+        r, model=None if vehicle is None else vehicle.name), r) for r in sources]
+    vehicle = get_model(recordings[0].model) if vehicle is None else vehicle
+    overrides = {**recordings[0].params, **overrides}
     vehicle = vehicle.with_params(**overrides) if overrides else vehicle
     calibrate = _parameter_names(calibrate, vehicle)
+    for rec in recordings:
+        if rec.model != vehicle.name:
+            return Diagnosis(vehicle.name, None, _other_model(rec, vehicle))
+    if method == "free" or (method == "auto" and _model_test(recordings)):
+        from .model_test import diagnose_series
+
+        return diagnose_series(recordings, vehicle, calibrate, log=log)
+    if len(recordings) > 1:
+        raise ValueError("a series of recordings is judged in free simulation only: "
+                         "use method='free' (or 'auto')")
+    recording = recordings[0]
     problem = check(recording, vehicle)
     if problem:
         return Diagnosis(vehicle.name, None, problem)
@@ -176,8 +223,9 @@ def diagnose(recording: Recording | str | Path, model: str | VehicleModel | None
         log(f"smoothing {len(recording.time)} samples with the nominal model and searching the "
             "catalogue (a few seconds)...")
     calibration: dict[str, float] = {}
+    quality: dict[str, Any] = {}
     if calibrate:
-        vehicle, calibration = _calibrate(recording, vehicle, calibrate)
+        vehicle, calibration, quality = _calibrate(recording, vehicle, calibrate)
     residuals = estimate(recording, vehicle)
     if not residuals.observable.any():
         return Diagnosis(vehicle.name, None, "the measured channels observe no state")
@@ -189,24 +237,42 @@ def diagnose(recording: Recording | str | Path, model: str | VehicleModel | None
     selection = select(residuals, config)
     findings = [_finding(s, residuals) for s in selection.findings]
     diagnosis = Diagnosis(vehicle.name, bool(findings), "", calibration=calibration,
-                          residuals=residuals, rollouts=rollouts, selection=selection,
-                          findings=findings)
+                          calibration_quality=quality, residuals=residuals, rollouts=rollouts,
+                          selection=selection, findings=findings)
     _locate(diagnosis)
     _validate(diagnosis, config)
     _confirm(diagnosis, config)
     return diagnosis
 
 
+def _named(recording: Recording, path: str | Path) -> Recording:
+    recording.meta.setdefault("name", Path(path).name)
+    return recording
+
+
+def _model_test(recordings: Sequence[Recording]) -> bool:
+    """A series or a free decay (every input held): judged in free simulation."""
+    rec = recordings[0]
+    return len(recordings) > 1 or not rec.inputs.size \
+        or bool(np.all(np.ptp(rec.inputs, axis=0) == 0))
+
+
+def _other_model(recording: Recording, vehicle: VehicleModel) -> str:
+    return (f"the recording is of model {recording.model!r}, not {vehicle.name!r}: "
+            f"diagnose it with --model {recording.model}")
+
+
 # -- checks ---------------------------------------------------------------------------------------
 def check(recording: Recording, vehicle: VehicleModel) -> str:
     """Why the recording cannot be diagnosed against ``vehicle``, or ``""``."""
     if recording.model != vehicle.name:
-        return (f"the recording is of model {recording.model!r}, not {vehicle.name!r}: "
-                f"diagnose it with --model {recording.model}")
+        return _other_model(recording, vehicle)
     n, duration = len(recording.time), float(recording.time[-1] - recording.time[0])
     if n < MIN_SAMPLES or duration < MIN_DURATION:
         return (f"too short to say anything: {n} samples over {duration:.1f} s; need at least "
-                f"{MIN_SAMPLES} samples and {MIN_DURATION:.0f} s (30 % of it is held out)")
+                f"{MIN_SAMPLES} samples and {MIN_DURATION:.0f} s (30 % of it is held out) to "
+                "judge a record in a seaway; a model test (decay, zigzag, lab run) is judged "
+                "in free simulation: --method free, or several recordings as one series")
     y = recording.measurements
     noise = white_noise_std(y)
     moving = np.std(y, axis=0) > MIN_SIGNAL_TO_NOISE * noise
@@ -267,29 +333,57 @@ def _parameter_names(names: Sequence[str] | str, vehicle: VehicleModel) -> tuple
         raise ValueError(f"calibrate: {error}") from None
 
 
-def _calibrate(recording: Recording, vehicle: VehicleModel,
-               names: Sequence[str]) -> tuple[VehicleModel, dict[str, float]]:
-    """Fit the named parameters by equation-error least squares (Gauss-Newton on the smoothed
-    states, two passes: the smoother is rerun with the calibrated model)."""
+def _calibrate(recording: Recording, vehicle: VehicleModel, names: Sequence[str]
+               ) -> tuple[VehicleModel, dict[str, float], dict[str, Any]]:
+    """Fit the named parameters by equation-error least squares on the smoothed states (two
+    passes: the smoother is rerun with the calibrated model). A parameter the measured states'
+    equations do not contain is left as it was and reported so, never passed off as
+    calibrated."""
     values = {n: float(getattr(vehicle.params, n)) for n in names}
+    quality: dict[str, Any] = {"parameters": {}}
     for _ in range(2):
-        residuals = estimate(recording, vehicle)
-        x, u = residuals.midpoint, residuals.u[:-1]
-        measured = [i for i, s in enumerate(vehicle.state_names) if s in residuals.channels]
-        weights = 1 / np.maximum(np.var(residuals.error[:, measured], axis=0), 1e-300)
-        for _ in range(5):
-            base = vehicle.rhs_with(x, u, None, values)
-            columns = []
-            for n in names:
-                step = 1e-4 * max(abs(values[n]), 1e-3)
-                columns.append((vehicle.rhs_with(x, u, None, {**values, n: values[n] + step})
-                                - base)[:, measured] / step)
-            J = np.stack(columns, axis=-1) * np.sqrt(weights)[None, :, None]
-            r = (residuals.error + vehicle.rhs(x, u) - base)[:, measured] * np.sqrt(weights)
-            delta, *_ = np.linalg.lstsq(J.reshape(-1, len(names)), r.ravel(), rcond=None)
-            values = {n: values[n] + float(d) for n, d in zip(names, delta, strict=True)}
+        values, free, converged = _equation_fit(estimate(recording, vehicle), values)
+        quality["converged"] = converged
         vehicle = vehicle.with_params(**values)
-    return vehicle, values
+    for n in names:
+        quality["parameters"][n] = {
+            "value": values[n],
+            "status": "identified" if n in free else
+            "not identifiable: the equations of the measured channels do not contain it"}
+    return vehicle, {n: values[n] for n in free}, quality
+
+
+def _equation_fit(residuals: Residuals, values: dict[str, float]
+                  ) -> tuple[dict[str, float], list[str], bool]:
+    """One pass of :func:`_calibrate`: scipy's bounded trust region on the measured states'
+    equation errors; the values, the names the equations contain, and convergence."""
+    from scipy import optimize
+
+    from .output_error import parameter_bounds
+
+    vehicle = residuals.model
+    x, u = residuals.midpoint, residuals.u[:-1]
+    measured = [i for i, s in enumerate(vehicle.state_names) if s in residuals.channels]
+    scale = 1 / np.sqrt(np.maximum(np.var(residuals.error[:, measured], axis=0), 1e-300)
+                        * len(x))
+    target = (residuals.error + vehicle.rhs(x, u))[:, measured]
+
+    def errors(z: FloatArray, free: Sequence[str]) -> FloatArray:
+        trial = {**values, **dict(zip(free, z.tolist(), strict=True))}
+        with np.errstate(all="ignore"):
+            e = (vehicle.rhs_with(x, u, None, trial)[:, measured] - target) * scale
+        return np.clip(np.nan_to_num(e, nan=1e6), -1e6, 1e6).ravel()
+
+    base = errors(np.array([]), ())
+    free = [n for n in values
+            if np.any(errors(np.array([values[n] * 1.01 + 1e-6]), [n]) != base)]
+    if not free:
+        return values, free, True
+    low, high = parameter_bounds(vehicle, free)
+    start = np.clip([values[n] for n in free], low, high)
+    fit = optimize.least_squares(errors, start, bounds=(low, high), x_scale="jac",
+                                 args=(free,))
+    return {**values, **dict(zip(free, fit.x.tolist(), strict=True))}, free, bool(fit.success)
 
 
 # -- locate ---------------------------------------------------------------------------------------
@@ -422,8 +516,11 @@ def findings_model(res: Residuals, fitted: Sequence[Fitted]
 
 
 def _finding_dict(f: Finding) -> dict[str, Any]:
-    return {k: getattr(f, k) for k in ("effect", "target", "parameters", "std", "confidence",
-                                       "explanation", "improvement")}
+    out = {k: getattr(f, k) for k in ("effect", "target", "parameters", "std", "confidence",
+                                      "explanation", "improvement")}
+    if f.standard_form:
+        out["standard_form"] = f.standard_form
+    return out
 
 
 def _plain(value: Any) -> Any:
@@ -432,6 +529,14 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.ndarray):
         return value.tolist()
     raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
+
+
+def _with_unit(value: float, unit: str) -> str:
+    """``value unit``, angles also in degrees."""
+    text = f"{value:.4g} {unit}"
+    if unit.startswith("rad"):
+        text += f" ({math.degrees(value):.3g} deg{unit[3:]})"
+    return text
 
 
 def _fmt(value: Any) -> str:

@@ -11,19 +11,28 @@ from .residuals import Residuals
 
 def explain(effect: Effect, scored: Any, residuals: Residuals) -> str:
     """One or two sentences a marine engineer can act on."""
-    p, t = effect.parameters, effect.target
     share = f"it removes {scored.alone:.0%} of the held-out prediction error beyond sensor noise"
-    text = {
+    return f"{describe(effect)}; {share}."
+
+
+def describe(effect: Effect) -> str:
+    """What the effect means for the vehicle, with its numbers."""
+    p, t = effect.parameters, effect.target
+    return {
         "current": f"a steady force or current the model lacks: {t}'s equation needs a constant "
                    f"{p.get('b', 0):+.3g} per second",
         "linear_damping": f"the linear damping of {t} is wrong: {t}'s equation needs "
                           f"{p.get('c', 0):+.3g}*{t} ({'more' if p.get('c', 0) < 0 else 'less'}"
                           " damping than modelled)",
-        "quadratic_damping": f"{t} decays faster at large |{t}| than the linear model allows: "
-                             f"a drag {p.get('c', 0):+.3g}*{t}*|{t}| (quadratic, viscous/"
-                             "eddy-making)",
-        "nonlinear_damping": f"damping of {t} grows with amplitude faster than x|x|: "
-                             f"{p.get('c', 0):+.3g}*{t}^3",
+        "quadratic_damping": (f"{t} decays faster at large |{t}| than the linear model allows: "
+                              f"a drag {p.get('c', 0):+.3g}*{t}*|{t}| (quadratic, viscous/"
+                              "eddy-making)") if p.get("c", 0) <= 0 else
+                             (f"{t} decays slower at large |{t}| than the linear model allows: "
+                              f"{p.get('c', 0):+.3g}*{t}*|{t}| (less damping with amplitude)"),
+        "nonlinear_damping": (f"damping of {t} grows with amplitude faster than x|x|: "
+                              f"{p.get('c', 0):+.3g}*{t}^3") if p.get("c", 0) <= 0 else
+                             (f"damping of {t} falls with amplitude: "
+                              f"{p.get('c', 0):+.3g}*{t}^3"),
         "coupling": f"{p.get('source')} drives {t} in a way the model omits: "
                     f"{p.get('c', 0):+.3g}*{p.get('source')} in {t}'s equation",
         "nonlinear_restoring": f"the restoring force on {t} is not linear in "
@@ -51,4 +60,3 @@ def explain(effect: Effect, scored: Any, residuals: Residuals) -> str:
         "sensor_bias": f"the {t} sensor reads {p.get('b', 0):+.3g} off (constant bias): the "
                        "other channels contradict it",
     }[effect.effect]
-    return f"{text}; {share}."

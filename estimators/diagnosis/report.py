@@ -63,7 +63,11 @@ def write_report(diagnosis: Diagnosis, directory: str | Path, recording_name: st
     directory.mkdir(parents=True, exist_ok=True)
     diagnosis.to_json(directory / "diagnosis.json")
     figures: list[tuple[str, str]] = []
-    if diagnosis.mismatch is not None and diagnosis.residuals is not None:
+    if diagnosis.comparison is not None:  # a model test, judged in free simulation
+        from .model_test_report import write_figures as write_model_test_figures
+
+        figures = write_model_test_figures(diagnosis, directory, recording_name)
+    elif diagnosis.mismatch is not None and diagnosis.residuals is not None:
         figures = write_figures(diagnosis, directory)
     path = directory / "report.md"
     path.write_text(markdown(diagnosis, figures, recording_name))
@@ -86,6 +90,10 @@ def write_figures(diagnosis: Diagnosis, directory: Path) -> list[tuple[str, str]
 def markdown(diagnosis: Diagnosis, figures: Sequence[tuple[str, str]] = (),
              recording_name: str = "") -> str:
     """The report's text; ``figures`` are ``(relative file name, caption)`` pairs."""
+    if diagnosis.comparison is not None:  # a model test, judged in free simulation
+        from .model_test_report import markdown as model_test_markdown
+
+        return model_test_markdown(diagnosis, figures, recording_name)
     title = recording_name or diagnosis.model
     parts = [f"# Mismatch diagnosis: {_cell(title)}", "",
              f"Model: `{diagnosis.model}`" + (f" · recording: `{recording_name}`"

@@ -25,6 +25,7 @@ _MODELS: dict[str, str] = {
     "rov": "rov:ROVModel",
     "dp_vessel": "dp_vessel:DPVesselModel",
     "hovercraft": "hovercraft:HovercraftModel",
+    "nomoto": "nomoto:NomotoModel",
 }
 
 

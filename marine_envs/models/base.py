@@ -8,6 +8,7 @@ with :func:`dataclasses.replace` (or :meth:`VehicleModel.with_params`) and valid
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Mapping
@@ -45,6 +46,10 @@ class VehicleModel(ABC):
     #: Parameters in which ``rhs`` is affine (a coefficient times a term of the forces, with the
     #: mass matrix not involved): :meth:`rhs_with` varies them per row for one ``rhs`` call each.
     affine_parameters: ClassVar[frozenset[str]] = frozenset()
+    #: True when :meth:`rhs` reads its parameters at call time with numpy arithmetic only, so a
+    #: parameter may hold one value per batch row (:meth:`with_rows`): one ``rhs`` call for any
+    #: number of parameter sets.
+    row_parameters: ClassVar[bool] = False
 
     def __init__(self, params: Any) -> None:
         self.params = params
@@ -128,6 +133,8 @@ class VehicleModel(ABC):
         values = {k: np.broadcast_to(np.asarray(v, dtype=float), shape).ravel()
                   for k, v in params.items()}
         other = [k for k in values if k not in self.affine_parameters]
+        if self.row_parameters:
+            return self.with_rows(**values).rhs(*flat).reshape(*shape, -1)
         if not other:
             return self._rhs_affine(*flat, values).reshape(*shape, -1)
         out = np.empty((flat[0].shape[0], len(self.state_names)))
@@ -194,6 +201,21 @@ class VehicleModel(ABC):
         docs/models.md)."""
         self.check_parameter_names(changes)
         return type(self)(dataclasses.replace(self.params, **changes))
+
+    def with_rows(self, **values: ArrayLike) -> VehicleModel:
+        """A copy whose named parameters hold one value per batch row (arrays broadcasting
+        against the batch shape of ``x``; not validated: for estimators that try many values at
+        once). :raises TypeError: the model does not declare :attr:`row_parameters`."""
+        if not self.row_parameters:
+            raise TypeError(f"model {self.name!r} cannot take a parameter per row")
+        self.check_parameter_names(values)
+        params = copy.copy(self.params)
+        for name, value in values.items():  # frozen: bypass __setattr__, not the names check
+            object.__setattr__(params, name, np.asarray(value, dtype=float))
+        model = copy.copy(self)
+        model.params = params
+        model.__dict__.pop("_step_models", None)
+        return model
 
     def _split(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None):
         """Arrays of states, inputs and disturbances broadcast to one batch shape."""

@@ -69,6 +69,7 @@ class USVModel(VehicleModel):
     #: The USV observer patent's measured channels: p = 4, sway speed v is not measured.
     measured_names: ClassVar[tuple[str, ...]] = ("r", "psi", "p", "phi")
     is_linear: ClassVar[bool] = True
+    row_parameters: ClassVar[bool] = True
 
     def __init__(self, params: USVParams | None = None) -> None:
         super().__init__(USVParams() if params is None else params)

@@ -1,0 +1,514 @@
+"""Mismatch diagnosis (:func:`estimators.diagnosis.diagnose`) on every real recording we have,
+with plain reference fits that do not use the diagnosis.
+
+One Markdown row per diagnosis: case, recordings, model, ``--calibrate``, verdict, top findings
+(effect on target, key coefficient ± std), the final model's standard form, calibrated values
+± std, held-out RMS error before → after (angles in deg, rates in deg/s, positions in m), the
+held-out improvement and the seconds it took. Cases (``--cases``):
+
+1. ``roll-decay``: the shipped KVLCC2 roll decay (10 Hz), model ``usv`` from its DEFAULT
+   parameters (the recording's own ``params`` are dropped), ``calibrate="wn,zeta"``. Reference:
+   a least-squares fit of ``phi = A exp(-zeta wn t) cos(wd t + phase) + offset`` to the whole
+   record (scipy ``curve_fit``).
+2. ``sampling``: the original 100 Hz decay (``--shared``/roll_decay_kvlcc2), cut at the release
+   with the tail mean removed as ``examples/real_data/kvlcc2.py`` does, at 100, 20 and 10 Hz
+   (``resample_poly``) and the 10 Hz version cut to its first 80 %.
+3. ``nominal-zeta``: the shipped decay with nominal zeta 0, 0.5, 1 and 2 times the LS fit's
+   (wn at the default), calibrating wn, zeta.
+4. ``zigzag-series``: the three HSVA KVLCC2 zigzags (``--shared``/zigzag_kvlcc2_hsva, read by
+   path, never copied) as one series for ``nomoto``, ``calibrate="K,T"``, ``method="free"``, and
+   each alone. Reference (own code): Nomoto ``r' = b (delta + delta0) - d1 r`` (K = b/d1,
+   T = 1/d1) and the same with Norrbin's ``- d3 r^3``, fitted (``least_squares``) to the yaw
+   rate of two tests in free RK4 simulation at 4 Hz and simulated freely on the third from its
+   measured start: heading RMS error of each and the cut.
+5. ``hovercraft-epfl``: the two shipped EPFL hovercraft runs (their metadata carries
+   hovercraft_epfl_params.json) as one series, ``method="free"``, no calibration (with
+   ``--hover-calibrate T0,N_Hr`` also a row calibrating those: slow, over 10 minutes).
+
+Acceptance targets (from the issue), checked at the end:
+
+- roll decay: calibrated wn within 2 % and zeta within 20 % of the plain LS linear fit; top
+  finding amplitude-dependent damping and/or cubic restoring on p, held-out improvement >= 50 %;
+- the same top finding at 100/20/10 Hz and on 80 % of the record, and with nominal zeta anywhere
+  in [0, 2x] the LS fit's;
+- zigzag series: top finding nonlinear yaw damping on r (r^3 or r|r|); leave-one-out
+  free-simulation heading error cut >= 30 % (the diagnosis's pooled psi RMS before → after).
+
+Exit code 1 when a target is missed. Run time: about 5-10 minutes for all cases.
+
+    python benchmarks/real_recordings.py [--cases roll-decay,zigzag-series] [--shared PATH]
+                                         [--json out.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy import optimize, signal
+
+from estimators.diagnosis import diagnose
+from marine_envs.recording import Recording, read_recording
+
+REPO = Path(__file__).resolve().parents[1]
+REAL = REPO / "marine_envs" / "data" / "real"
+DECAY = REAL / "kvlcc2_roll_decay.csv"
+HOVERCRAFT = sorted(REAL.glob("hovercraft_epfl_2019-*.csv"))
+ROLL_100HZ = Path("roll_decay_kvlcc2") / "model_test_21338.csv"
+ZIGZAG_DIR = Path("zigzag_kvlcc2_hsva")
+ZIGZAGS = ("HSVA_CPMC_KVLCC2_Z_10_10_S.dat", "HSVA_CPMC_KVLCC2_Z_20_05.dat",
+           "HSVA_CPMC_KVLCC2_Z_35_05.dat")
+#: Hovercraft parameters to calibrate in an extra row (``--hover-calibrate``): thrust and yaw
+#: damping. Off by default: it took over 10 minutes in a trial.
+HOVER_CALIBRATE = "T0,N_Hr"
+CASES = ("roll-decay", "sampling", "nominal-zeta", "zigzag-series", "hovercraft-epfl")
+#: Effects that make a decay amplitude-dependent (roll-decay target).
+AMPLITUDE_EFFECTS = ("quadratic_damping", "nonlinear_damping", "nonlinear_restoring")
+#: Effects that are nonlinear yaw damping (zigzag target).
+YAW_DAMPING_EFFECTS = ("quadratic_damping", "nonlinear_damping")
+WN_TOLERANCE, ZETA_TOLERANCE, IMPROVEMENT_TARGET, HEADING_CUT_TARGET = 0.02, 0.20, 0.5, 0.3
+TAIL_WINDOW, EDGE_DROP = 60.0, 1.0  # as examples/real_data/kvlcc2.py
+ZIGZAG_DECIMATION = 5  # 20 Hz -> 4 Hz for the reference fits
+
+
+# -- reading --------------------------------------------------------------------------------------
+def shipped_decay() -> Recording:
+    """The shipped roll decay without its own ``params`` (the model starts at its defaults)."""
+    rec = read_recording(DECAY)
+    return Recording(rec.data, rec.model, params={}, meta={**rec.meta, "name": DECAY.name})
+
+
+def shipped_hovercraft() -> list[Recording]:
+    """The two shipped hovercraft runs, their metadata's ``params`` kept."""
+    return [Recording(rec.data, rec.model, rec.params, {**rec.meta, "name": path.name})
+            for path, rec in ((p, read_recording(p)) for p in HOVERCRAFT)]
+
+
+def decay_versions(path: Path) -> dict[str, Recording]:
+    """The original 100 Hz decay cut at the release (largest |phi|), tail mean (whole periods of
+    the last 60 s) removed, at 100, 20 and 10 Hz, and the 10 Hz one cut to its first 80 %.
+    The resampled versions are filtered on the whole record, phased to keep the release sample,
+    and all lose the last second (the filter's edge)."""
+    raw = pd.read_csv(path)
+    phi, fs = raw["phi"].to_numpy(), 100.0
+    release = int(np.argmax(np.abs(phi)))
+    tail = np.flatnonzero(raw["time"].to_numpy() >= raw["time"].iloc[-1] - TAIL_WINDOW)
+    peaks = tail[signal.find_peaks(signal.savgol_filter(phi[tail], 51, 3))[0]]
+    phi = phi - phi[peaks[0]:peaks[-1]].mean()
+    out = {}
+    for factor in (1, 5, 10):
+        start = release % factor
+        x = phi[start:] if factor == 1 else signal.resample_poly(phi[start:], 1, factor,
+                                                                 padtype="line")
+        first, rate = (release - start) // factor, fs / factor
+        x = x[first:len(x) - int(EDGE_DROP * rate)]
+        out[f"{rate:.0f} Hz"] = _decay_recording(x, rate, f"{path.name} at {rate:.0f} Hz")
+    ten = out["10 Hz"].data
+    out["10 Hz, first 80 %"] = Recording(ten.iloc[:int(0.8 * len(ten))], "usv",
+                                         meta={"name": f"{path.name} at 10 Hz, 80 %"})
+    return out
+
+
+def _decay_recording(phi: np.ndarray, rate: float, name: str) -> Recording:
+    time_ = np.arange(len(phi)) / rate
+    return Recording.from_arrays("usv", time_, np.zeros(len(phi)), {"phi": phi},
+                                 meta={"name": name})
+
+
+def read_hsva_zigzag(path: str | Path) -> Recording:
+    """An HSVA zigzag ``.dat`` (4 latin-1 header lines, 12 columns at 20 Hz: time s, x, y m,
+    psi deg, dx/dt, dy/dt m/s, r deg/s, roll deg, rudder deg, rpm, thrust, torque) as a
+    ``nomoto`` recording: input ``delta`` (rad, positive to port), measured ``r`` (rad/s) and
+    ``psi`` (rad, unwrapped, relative to the first sample); time from 0."""
+    path = Path(path)
+    table = np.loadtxt(path, skiprows=4, encoding="latin-1")
+    if table.ndim != 2 or table.shape[1] != 12:
+        raise ValueError(f"{path}: expected 12 columns, got shape {table.shape}")
+    psi = np.unwrap(np.radians(table[:, 3]))
+    time_ = np.round(table[:, 0] - table[0, 0], 9)
+    return Recording.from_arrays("nomoto", time_, np.radians(table[:, 8]),
+                                 {"r": np.radians(table[:, 6]), "psi": psi - psi[0]},
+                                 meta={"name": path.name})
+
+
+# -- reference fits -------------------------------------------------------------------------------
+def linear_decay_fit(time_: np.ndarray, x: np.ndarray) -> dict[str, float]:
+    """Least squares of ``x = A exp(-zeta wn t) cos(wd t + phase) + offset`` (wd = wn
+    sqrt(1 - zeta^2)) over the whole record: wn, zeta, their std, the RMS residual."""
+    def model(t, a, wn, zeta, phase, offset):
+        wd = wn * math.sqrt(max(1 - zeta**2, 1e-12))
+        return a * np.exp(-zeta * wn * t) * np.cos(wd * t + phase) + offset
+
+    centred = x - np.mean(x)
+    cross = time_[np.flatnonzero(np.diff(np.signbit(centred)))]
+    wd0 = math.pi * (len(cross) - 1) / (cross[-1] - cross[0])
+    quarter = max(len(x) // 4, 1)
+    ratio = np.std(centred[:quarter]) / max(np.std(centred[-quarter:]), 1e-300)
+    zeta0 = min(max(math.log(max(ratio, 1.0001)) / (wd0 * 0.75 * (time_[-1] - time_[0])), 1e-4),
+                0.5)
+    a0 = x[0] - np.mean(x)
+    p0 = [abs(a0), wd0, zeta0, 0.0 if a0 > 0 else math.pi, float(np.mean(x))]
+    theta, cov = optimize.curve_fit(model, time_ - time_[0], x, p0=p0, maxfev=20000)
+    std = np.sqrt(np.diag(cov))
+    rms = float(np.sqrt(np.mean((model(time_ - time_[0], *theta) - x) ** 2)))
+    return {"wn": float(theta[1]), "wn_std": float(std[1]), "zeta": float(abs(theta[2])),
+            "zeta_std": float(std[2]), "rms": rms}
+
+
+def simulate_yaw(theta: Sequence[float], t: np.ndarray, delta: np.ndarray,
+                 r0: float) -> tuple[np.ndarray, np.ndarray]:
+    """Free RK4 simulation of ``r' = b (delta + delta0) - d1 r - d3 r^3``, ``psi' = r`` (Nomoto
+    with ``b = K/T``, ``d1 = 1/T``; Norrbin's ``d3`` is 0 when ``theta`` has three entries),
+    the rudder held over each step, from ``(r0, 0)``."""
+    b, d1, delta0, d3 = (*theta, 0.0)[:4]
+    r, psi = np.empty(len(t)), np.empty(len(t))
+    r[0], psi[0] = r0, 0.0
+    for k in range(len(t) - 1):
+        h, force = t[k + 1] - t[k], b * (delta[k] + delta0)
+        r1 = r[k]
+        k1 = force - d1 * r1 - d3 * r1**3
+        r2 = r[k] + 0.5 * h * k1
+        k2 = force - d1 * r2 - d3 * r2**3
+        r3 = r[k] + 0.5 * h * k2
+        k3 = force - d1 * r3 - d3 * r3**3
+        r4 = r[k] + h * k3
+        k4 = force - d1 * r4 - d3 * r4**3
+        r[k + 1] = r[k] + h * (k1 + 2 * k2 + 2 * k3 + k4) / 6
+        psi[k + 1] = psi[k] + h * (r1 + 2 * r2 + 2 * r3 + r4) / 6
+        if not math.isfinite(r[k + 1]) or abs(r[k + 1]) > 10:
+            r[k + 1:], psi[k + 1:] = r[k + 1], psi[k + 1]  # diverged: freeze (a large error)
+            break
+    return r, psi
+
+
+def _nomoto(theta: np.ndarray) -> dict[str, float]:
+    """``b, d1, delta0[, d3]`` as Nomoto's K, T (and Norrbin's r^3 coefficient)."""
+    b, d1, delta0, *d3 = theta.tolist()
+    return {"K": b / d1, "T": 1 / d1, "delta0": delta0, **({"d3": d3[0]} if d3 else {})}
+
+
+def _decimated(rec: Recording, factor: int) -> tuple[np.ndarray, ...]:
+    """Time, the rudder's mean over each step (held) and r, psi sampled every ``factor``."""
+    n = len(rec.time) // factor * factor
+    delta = rec.inputs[:n, 0].reshape(-1, factor).mean(axis=1)
+    r, psi = rec.data["r"].to_numpy()[:n:factor], rec.data["psi"].to_numpy()[:n:factor]
+    return rec.time[:n:factor], delta, r, psi
+
+
+def yaw_leave_one_out(recordings: Sequence[Recording]) -> list[dict[str, Any]]:
+    """Nomoto and Nomoto-Norrbin fitted to the yaw rate of all tests but one in free simulation
+    (d1 of either sign: the hull may be course-unstable), free-simulated on that one: heading
+    RMS error, deg, of each and the cut. (Fitted to heading and yaw rate together instead,
+    Norrbin extrapolates worse than Nomoto to the 20/5 test: 12.9 -> 19.4 deg.)"""
+    runs = [_decimated(rec, ZIGZAG_DECIMATION) for rec in recordings]
+
+    def residuals(theta: np.ndarray, train: Sequence[tuple[np.ndarray, ...]]) -> np.ndarray:
+        """Free-simulation yaw-rate errors, each test's mean square counting once."""
+        return np.concatenate([(simulate_yaw(theta, t, delta, r[0])[0] - r) / math.sqrt(len(t))
+                               for t, delta, r, _ in train])
+
+    rows = []
+    for k, rec in enumerate(recordings):
+        train = [run for j, run in enumerate(runs) if j != k]
+        linear = optimize.least_squares(residuals, [-0.008, 0.1, 0.0], args=(train,)).x
+        norrbin = optimize.least_squares(residuals, [*linear, 0.0], args=(train,)).x
+        t, delta, r, psi = runs[k]
+        errors = [math.degrees(math.sqrt(np.mean((simulate_yaw(th, t, delta, r[0])[1] - psi)
+                                                 ** 2))) for th in (linear, norrbin)]
+        rows.append({"held_out": rec.meta["name"], "linear_deg": errors[0],
+                     "norrbin_deg": errors[1], "cut": 1 - errors[1] / errors[0],
+                     "linear": _nomoto(linear), "norrbin": _nomoto(norrbin)})
+    return rows
+
+
+# -- diagnosing -----------------------------------------------------------------------------------
+def _fmt(value: float) -> str:
+    return f"{value:.3g}"
+
+
+def _convert(rec: Recording, channel: str, value: float) -> tuple[float, str]:
+    """An RMS value of ``channel`` in deg or deg/s for angles and rates, SI otherwise."""
+    unit = rec.units.get(channel, "")
+    if unit.startswith("rad"):
+        return math.degrees(value), unit.replace("rad", "deg")
+    return value, unit
+
+
+def run_diagnosis(case: str, recordings: Sequence[Recording], model: str, calibrate: str = "",
+                  method: str = "auto", **kwargs: Any) -> dict[str, Any]:
+    """One diagnosis, timed, as a table row (its exception, if any, as the verdict)."""
+    names = ", ".join(str(r.meta.get("name", "?")) for r in recordings)
+    row: dict[str, Any] = {"case": case, "recordings": names, "model": model,
+                           "calibrate": calibrate, "method": method}
+    start = time.perf_counter()
+    try:
+        d = diagnose(list(recordings), model, calibrate=calibrate, method=method, **kwargs)
+    except Exception as exc:  # reported, not hidden: the table says what broke
+        row.update(seconds=time.perf_counter() - start, verdict=f"error: {type(exc).__name__}: "
+                   f"{exc}", traceback=traceback.format_exc(), findings=[], top=None)
+        return row
+    row["seconds"] = time.perf_counter() - start
+    row["verdict"] = {True: "mismatch" if d.findings else "mismatch, unexplained by the "
+                      "catalogue", False: "none"}.get(d.mismatch, f"cannot judge: {d.reason}")
+    row["findings"] = [{"effect": f.effect, "target": f.target,
+                        "key": "b" if "b" in f.parameters else "c",
+                        "value": f.parameters.get("b", f.parameters.get("c")),
+                        "std": f.std.get("b", f.std.get("c")), "improvement": f.improvement,
+                        "standard_form": f.standard_form} for f in d.findings]
+    row["top"] = (d.findings[0].effect, d.findings[0].target) if d.findings else None
+    row["calibrated"] = d.calibration_quality.get("parameters", {})
+    row["converged"] = d.calibration_quality.get("converged")
+    row["rms"] = {}
+    for stage in ("before", "after"):
+        for channel, value in d.fit.get(stage, {}).get("rmse", {}).items():
+            converted, unit = _convert(recordings[0], channel, value)
+            row["rms"].setdefault(channel, {"unit": unit})[stage] = converted
+    row["improvement"] = d.fit.get("improvement")
+    if d.comparison is not None and calibrate:  # the calibrated names refitted with the terms
+        final = d.comparison.final.values()
+        row["final_values"] = {n: final[n] for n in row["calibrated"] if n in final}
+    row["diagnosis"] = d.to_dict()
+    return row
+
+
+def check_decay(row: dict[str, Any], reference: dict[str, float]) -> None:
+    """Add the wn (2 %) and zeta (20 %) checks against the LS fit to a decay row."""
+    cal = row.get("calibrated", {})
+    if "wn" in cal and "zeta" in cal:
+        row["wn_ok"] = abs(cal["wn"]["value"] / reference["wn"] - 1) <= WN_TOLERANCE
+        row["zeta_ok"] = abs(cal["zeta"]["value"] / reference["zeta"] - 1) <= ZETA_TOLERANCE
+    row["ls_fit"] = reference
+
+
+# -- the cases ------------------------------------------------------------------------------------
+def case_roll_decay(shared: Path, notes: list[str]) -> list[dict[str, Any]]:
+    rec = shipped_decay()
+    reference = linear_decay_fit(rec.time, rec.data["phi"].to_numpy())
+    notes.append(f"roll-decay LS linear fit (whole record, curve_fit): wn = "
+                 f"{reference['wn']:.4f} ± {reference['wn_std']:.1e} rad/s, zeta = "
+                 f"{reference['zeta']:.5f} ± {reference['zeta_std']:.1e}, RMS residual "
+                 f"{math.degrees(reference['rms']):.3f} deg")
+    row = run_diagnosis("roll-decay", [rec], "usv", "wn,zeta")
+    check_decay(row, reference)
+    return [row]
+
+
+def case_sampling(shared: Path, notes: list[str]) -> list[dict[str, Any]]:
+    path = shared / ROLL_100HZ
+    if not path.is_file():
+        notes.append(f"sampling: skipped, {path} is absent")
+        return []
+    rows = []
+    for label, rec in decay_versions(path).items():
+        row = run_diagnosis(f"sampling {label}", [rec], "usv", "wn,zeta")
+        check_decay(row, linear_decay_fit(rec.time, rec.data["phi"].to_numpy()))
+        rows.append(row)
+    notes.append(_same_top("sampling", rows))
+    return rows
+
+
+def case_nominal_zeta(shared: Path, notes: list[str]) -> list[dict[str, Any]]:
+    rec = shipped_decay()
+    reference = linear_decay_fit(rec.time, rec.data["phi"].to_numpy())
+    rows = []
+    for factor in (0.0, 0.5, 1.0, 2.0):
+        zeta = factor * reference["zeta"]
+        row = run_diagnosis(f"nominal zeta {factor:g}x = {zeta:.5f}", [rec], "usv", "wn,zeta",
+                            params={"zeta": zeta})
+        check_decay(row, reference)
+        rows.append(row)
+    notes.append(_same_top("nominal-zeta", rows))
+    return rows
+
+
+def case_zigzag(shared: Path, notes: list[str]) -> list[dict[str, Any]]:
+    paths = [shared / ZIGZAG_DIR / name for name in ZIGZAGS]
+    missing = [p for p in paths if not p.is_file()]
+    if missing:
+        notes.append(f"zigzag-series: skipped, absent: {', '.join(map(str, missing))}")
+        return []
+    recordings = [read_hsva_zigzag(p) for p in paths]
+    rows = [run_diagnosis("zigzag-series", recordings, "nomoto", "K,T", "free")]
+    rows += [run_diagnosis(f"zigzag {p.stem.split('_Z_')[1]} alone", [rec], "nomoto", "K,T",
+                           "free") for p, rec in zip(paths, recordings, strict=True)]
+    start = time.perf_counter()
+    loo = yaw_leave_one_out(recordings)
+    rows[0]["reference"] = loo
+    notes.append(f"zigzag reference (own code, {time.perf_counter() - start:.0f} s): "
+                 "leave-one-out free-simulation heading RMS, Nomoto -> Nomoto + Norrbin r^3:")
+    for item in loo:
+        notes.append(f"  held out {item['held_out']}: {item['linear_deg']:.1f} deg -> "
+                     f"{item['norrbin_deg']:.1f} deg (cut {item['cut']:.0%}); linear "
+                     + ", ".join(f"{k}={_fmt(v)}" for k, v in item["linear"].items())
+                     + "; Norrbin " + ", ".join(f"{k}={_fmt(v)}"
+                                                for k, v in item["norrbin"].items()))
+    notes.append(f"  mean cut {np.mean([item['cut'] for item in loo]):.0%} (the issue quotes "
+                 "linear 12-30 deg off, Norrbin cuts 14/78/55 %)")
+    return rows
+
+
+def case_hovercraft(shared: Path, notes: list[str], calibrate: str = "") -> list[dict[str, Any]]:
+    recordings = shipped_hovercraft()
+    notes.append("hovercraft-epfl: parameters from the recordings' metadata (the same overrides "
+                 "as hovercraft_epfl_params.json); diagnose merges the first recording's params"
+                 + ("" if calibrate else f"; calibrated row skipped (--hover-calibrate "
+                    f"{HOVER_CALIBRATE} adds it, over 10 minutes)"))
+    rows = [run_diagnosis("hovercraft-epfl", recordings, "hovercraft", "", "free")]
+    if calibrate:
+        rows.append(run_diagnosis("hovercraft-epfl", recordings, "hovercraft", calibrate, "free"))
+    return rows
+
+
+RUNNERS: dict[str, Callable[..., list[dict[str, Any]]]] = {
+    "roll-decay": case_roll_decay, "sampling": case_sampling,
+    "nominal-zeta": case_nominal_zeta, "zigzag-series": case_zigzag,
+    "hovercraft-epfl": case_hovercraft}
+
+
+def _same_top(case: str, rows: Sequence[dict[str, Any]]) -> str:
+    tops = {row["top"] for row in rows}
+    same = len(tops) == 1 and None not in tops
+    what = " on ".join(next(iter(tops))) if same else ", ".join(
+        "none" if t is None else " on ".join(t) for t in sorted(tops, key=str))
+    return f"{case}: top effect {'the same in all versions' if same else 'DIFFERS'}: {what}"
+
+
+# -- reporting ------------------------------------------------------------------------------------
+def _cell(text: str) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def format_row(row: dict[str, Any]) -> str:
+    findings = "; ".join(f"{f['effect']} on {f['target']} ({f['key']}={_fmt(f['value'])} ± "
+                         f"{_fmt(f['std'])})" for f in row["findings"][:3]) or "-"
+    form = row["findings"][-1]["standard_form"] if row["findings"] else {}
+    calibrated = ", ".join(f"{n}={_fmt(q['value'])} ± {_fmt(q['std'])}"
+                           for n, q in row.get("calibrated", {}).items()) or "-"
+    final = row.get("final_values", {})
+    if any(abs(v / row["calibrated"][n]["value"] - 1) > 0.1 for n, v in final.items()):
+        calibrated += " (final model: " + ", ".join(f"{n}={_fmt(v)}"
+                                                    for n, v in final.items()) + ")"
+    rms = ", ".join(f"{c} {_fmt(v['before'])} → {_fmt(v['after'])} {v['unit']}"
+                    for c, v in row.get("rms", {}).items() if "before" in v) or "-"
+    improvement = row.get("improvement")
+    improvement = "-" if improvement is None else (
+        improvement if isinstance(improvement, str) else f"{improvement:.0%}")
+    flags = ["-" if key not in row else ("PASS" if row[key] else "FAIL")
+             for key in ("wn_ok", "zeta_ok")]
+    cells = [row["case"], row["recordings"], row["model"], row["calibrate"] or "-",
+             row["verdict"], findings,
+             ", ".join(f"{k}={_fmt(v)}" for k, v in form.items()) or "-", calibrated, rms,
+             improvement, f"{row['seconds']:.1f}", *flags]
+    return "| " + " | ".join(_cell(c) for c in cells) + " |"
+
+
+HEADER = ("| case | recordings | model | --calibrate | verdict | top findings | standard form "
+          "(final model) | calibrated ± std | held-out RMS before → after | held-out improvement "
+          "| s | wn within 2 % of LS | zeta within 20 % of LS |\n" + "|---" * 10 + "|---:|---|---|")
+
+
+def acceptance(rows: Sequence[dict[str, Any]]) -> list[tuple[str, bool | None, str]]:
+    """(target, passed or None when its case did not run, detail)."""
+    by_case = {row["case"]: row for row in rows}
+    out: list[tuple[str, bool | None, str]] = []
+    decay = by_case.get("roll-decay")
+    if decay:
+        out.append(("roll decay: wn within 2 % of the LS fit", decay.get("wn_ok", False),
+                    _calibrated(decay, "wn")))
+        out.append(("roll decay: zeta within 20 % of the LS fit", decay.get("zeta_ok", False),
+                    _calibrated(decay, "zeta")))
+        top, improvement = decay["top"], decay.get("improvement")
+        ok = bool(top and top[0] in AMPLITUDE_EFFECTS and top[1] == "p"
+                  and isinstance(improvement, float) and improvement >= IMPROVEMENT_TARGET)
+        out.append(("roll decay: top finding amplitude-dependent damping / cubic restoring on "
+                    "p, held-out improvement >= 50 %", ok,
+                    f"{' on '.join(top) if top else 'none'}, {improvement}"))
+    for prefix, what in (("sampling", "same top finding at 100/20/10 Hz and on 80 %"),
+                         ("nominal zeta", "same top finding with nominal zeta in [0, 2x]")):
+        group = [row for row in rows if row["case"].startswith(prefix)]
+        if group:
+            tops = {row["top"] for row in group}
+            out.append((what, len(tops) == 1 and None not in tops,
+                        ", ".join(sorted("none" if t is None else " on ".join(t)
+                                         for t in tops))))
+    series = by_case.get("zigzag-series")
+    if series:
+        top = series["top"]
+        out.append(("zigzag series: top finding nonlinear yaw damping on r",
+                    bool(top and top[0] in YAW_DAMPING_EFFECTS and top[1] == "r"),
+                    " on ".join(top) if top else series["verdict"]))
+        psi = series.get("rms", {}).get("psi", {})
+        cut = 1 - psi["after"] / psi["before"] if "after" in psi and psi["before"] else None
+        out.append(("zigzag series: leave-one-out heading error cut >= 30 %",
+                    cut is not None and cut >= HEADING_CUT_TARGET,
+                    "n/a" if cut is None else f"{cut:.0%} (reference: mean "
+                    f"{np.mean([i['cut'] for i in series.get('reference', [])]):.0%})"))
+    return out
+
+
+def _calibrated(row: dict[str, Any], name: str) -> str:
+    value = row.get("calibrated", {}).get(name, {}).get("value")
+    return f"{name} = {_fmt(value) if value is not None else 'n/a'}, LS {_fmt(row['ls_fit'][name])}"
+
+
+# -- main -----------------------------------------------------------------------------------------
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--cases", default=",".join(CASES),
+                        help="comma-separated subset of: %(default)s")
+    parser.add_argument("--shared", type=Path, default=REPO.parent / "shared" / "data",
+                        help="the shared data folder (default: ../shared/data next to the "
+                        "repository: %(default)s)")
+    parser.add_argument("--hover-calibrate", default="", metavar="NAMES",
+                        help=f"also diagnose the hovercraft series calibrating these (e.g. "
+                        f"{HOVER_CALIBRATE}; slow)")
+    parser.add_argument("--json", type=Path, help="also write every row (with each "
+                        "diagnosis's to_dict()), the notes and the acceptance checks as JSON")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    cases = [c for c in args.cases.split(",") if c]
+    unknown = sorted(set(cases) - set(CASES))
+    if unknown:
+        sys.exit(f"unknown case(s) {unknown}; known: {', '.join(CASES)}")
+    rows: list[dict[str, Any]] = []
+    notes: list[str] = []
+    start = time.perf_counter()
+    for case in cases:
+        print(f"running {case} ...", file=sys.stderr, flush=True)
+        extra = {"calibrate": args.hover_calibrate} if case == "hovercraft-epfl" else {}
+        rows += RUNNERS[case](args.shared, notes, **extra)
+    print(HEADER)
+    for row in rows:
+        print(format_row(row))
+    print("\n" + "\n".join(notes))
+    for row in rows:
+        if "traceback" in row:
+            print(f"\n{row['case']} raised:\n{row['traceback']}")
+    checks = acceptance(rows)
+    print("\nAcceptance:")
+    for what, passed, detail in checks:
+        print(f"  {'PASS' if passed else 'FAIL'}  {what}: {detail}")
+    print(f"\n{len(rows)} diagnoses in {time.perf_counter() - start:.0f} s")
+    if args.json:
+        args.json.write_text(json.dumps(
+            {"rows": rows, "notes": notes,
+             "acceptance": [{"target": w, "passed": p, "detail": d} for w, p, d in checks]},
+            indent=2, default=str) + "\n")
+    return 0 if all(p for _, p, _ in checks) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

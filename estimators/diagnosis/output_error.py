@@ -1,0 +1,485 @@
+"""Output error: the model simulated freely over whole recordings, the test model tests are
+judged by.
+
+Start the model where each record starts, drive it with the recorded inputs and compare the
+whole time history of the measured channels. A model that is right only over a few seconds (a
+yaw model against a 20-s time constant, a damping right at one amplitude) fails this test, and
+parameters that only the whole history holds (a natural frequency and damping seen through the
+roll angle alone) are fitted by it.
+
+* :class:`Series` - one or several recordings of one vehicle on a common time step, resampled
+  to the model's bandwidth so the answer does not depend on the recorder's sample rate.
+* :class:`Structure` - what is fitted: named model parameters, coefficients of catalogue terms
+  and the initial states; its free simulations are batched over parameter sets (one simulation
+  gives the cost and its whole Jacobian).
+* :func:`fit` - bounded trust-region least squares (scipy ``least_squares``) with standard
+  errors from the residuals' effective number of independent samples.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import optimize, signal
+
+from marine_envs.models import VehicleModel
+from marine_envs.models.effects import Effect, applied_inputs, state_term
+from marine_envs.models.integrate import rk4
+from marine_envs.recording import Recording
+
+from .residuals import ANGLES, displacements, observable_states, white_noise_std
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+#: The internal time step resolves the fastest relevant motion with this many steps per radian.
+STEPS_PER_RADIAN = 4.0
+#: A residual this large (in signal scales) means the simulation diverged.
+DIVERGED = 1e3
+
+
+# -- the data -------------------------------------------------------------------------------------
+@dataclass
+class Run:
+    """One recording on the series' time step.
+
+    :param name: label (file name).  :param time: ``(T,)`` s from the record's start.
+    :param u: commanded inputs ``(T, n_u)``, held between samples.  :param y: the measured
+        channels ``(T, m)`` (angles unwrapped).  :param noise: their white-noise std.
+    """
+
+    name: str
+    time: FloatArray
+    u: FloatArray
+    y: FloatArray
+    noise: FloatArray
+
+    @property
+    def duration(self) -> float:
+        return float(self.time[-1] - self.time[0])
+
+
+@dataclass
+class Series:
+    """Recordings of one vehicle with the same channels, on one time step ``dt``.
+
+    :param scale: per channel, the RMS of the measured signal about its mean over all runs:
+        residuals are measured in it, so channels of different units weigh alike.
+    :param moving: per input, whether it moves in any run.
+    """
+
+    model: VehicleModel
+    channels: tuple[str, ...]
+    runs: list[Run]
+    dt: float
+    substeps: int
+    scale: FloatArray
+    moving: BoolArray
+
+    @classmethod
+    def from_recordings(cls, recordings: Sequence[Recording], model: VehicleModel,
+                        names: Sequence[str] = ()) -> Series:
+        """The recordings resampled to the model's bandwidth (anti-aliased decimation by the
+        largest integer factor that keeps :data:`STEPS_PER_RADIAN` steps per radian of the
+        fastest of: the record's own oscillation, the inputs' slew, and the model's modes, at
+        its nominal parameters and with ``names`` doubled and halved).
+
+        :raises ValueError: recordings that measure different channels or have different
+            sample periods.
+        """
+        channels = recordings[0].measured_names
+        for rec in recordings[1:]:
+            if rec.measured_names != channels:
+                raise ValueError(f"all recordings of a series must measure the same channels; "
+                                 f"{rec.measured_names} differs from {channels}")
+        dt = recordings[0].dt
+        if any(abs(r.dt / dt - 1) > 1e-3 for r in recordings):
+            raise ValueError("all recordings of a series must have one sample period; got "
+                             + ", ".join(f"{r.dt:g} s" for r in recordings))
+        omega = max([_record_bandwidth(r) for r in recordings] + [_model_bandwidth(model, names)])
+        factor = max(1, int(1 / (STEPS_PER_RADIAN * omega * dt)))
+        runs = [_run(r, channels, factor) for r in recordings]
+        y = np.concatenate([r.y for r in runs])
+        scale = np.maximum(np.std(y, axis=0), 1e-9)
+        moving = np.array([any(np.ptp(r.u[:, j]) > 0 for r in runs)
+                           for j in range(len(model.input_names))], dtype=bool)
+        h = dt * factor
+        substeps = max(1, math.ceil(_model_bandwidth(model, names) * h / 0.5))
+        return cls(model, tuple(channels), runs, h, substeps, scale, moving)
+
+    def excited(self) -> BoolArray:
+        """Per state: moved by an input that moves or by a measured state (through the
+        linearised model's couplings), and seen by the measured channels."""
+        A, B, _ = self.model.linearize()
+        reach = np.array([s in self.channels for s in self.model.state_names])
+        reach |= np.any(B[:, self.moving] != 0, axis=1)
+        while True:
+            more = reach | np.any(A[:, reach] != 0, axis=1)
+            if (more == reach).all():
+                break
+            reach = more
+        return reach & observable_states(self.model, self.channels)
+
+    def force_states(self) -> list[int]:
+        """Excited states whose equations carry forces (not kinematics)."""
+        kinematic = displacements(self.model)
+        return [i for i in np.flatnonzero(self.excited()) if i not in kinematic]
+
+
+def _run(recording: Recording, channels: Sequence[str], factor: int) -> Run:
+    y = recording.measurements.copy()
+    for j, name in enumerate(channels):
+        if name in ANGLES:
+            y[:, j] = np.unwrap(y[:, j])
+    noise = white_noise_std(y)
+    u, time = recording.inputs, recording.time - recording.time[0]
+    if factor > 1:
+        n = len(time) // factor * factor
+        y = signal.resample_poly(y[:n], 1, factor, axis=0, padtype="line")
+        u = u[:n].reshape(-1, factor, u.shape[1]).mean(axis=1)  # the held input's mean
+        time = time[:n:factor]
+        noise = noise / math.sqrt(factor)
+    name = str(recording.meta.get("source_file", recording.meta.get("name", "")))
+    return Run(name, time, u, y, noise)
+
+
+def _record_bandwidth(recording: Recording) -> float:
+    """The fastest motion in the record, rad/s: the spectral peak of the measured channels'
+    rates (their oscillation) and the inputs' largest slew relative to their range."""
+    dt = recording.dt
+    omegas = [0.05]
+    for y in recording.measurements.T:
+        rate = np.diff(y) / dt
+        f, psd = signal.periodogram(rate - rate.mean(), fs=1 / dt)
+        if psd.sum() > 0:  # the peak, not the centroid: sensor noise must not move it
+            omegas.append(2 * math.pi * float(f[np.argmax(psd)]))
+    for u in recording.inputs.T:
+        span = float(np.ptp(u))
+        if span > 0:
+            omegas.append(float(np.quantile(np.abs(np.diff(u)), 0.99)) / dt / (0.5 * span))
+    return max(omegas)
+
+
+def _model_bandwidth(model: VehicleModel, names: Sequence[str]) -> float:
+    """The fastest mode of the linearised model, at its parameters and with each of ``names``
+    doubled and halved (where calibration may take it)."""
+    models = [model]
+    for name in names:
+        value = float(getattr(model.params, name))
+        for factor in (0.5, 2.0):
+            try:
+                models.append(model.with_params(**{name: value * factor}))
+            except ValueError:
+                continue
+    return max(float(np.max(np.abs(np.linalg.eigvals(m.linearize()[0])), initial=0.0))
+               for m in models)
+
+
+# -- what is fitted -------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Structure:
+    """A model to fit: the series' model with ``names`` free, ``terms`` (catalogue state effects
+    or sensor biases, each with a free coefficient ``c`` or ``b``), fixed ``inputs`` effects,
+    and the initial value of every excited state of every run.
+
+    The unknowns ``theta`` are ordered: ``names``, the terms' coefficients, then each run's
+    free initial states.
+    """
+
+    series: Series
+    names: tuple[str, ...] = ()
+    terms: tuple[Effect, ...] = ()
+    inputs: tuple[Effect, ...] = ()
+
+    @property
+    def free_states(self) -> list[int]:
+        return [int(i) for i in np.flatnonzero(self.series.excited())]
+
+    @property
+    def size(self) -> int:
+        return len(self.names) + len(self.terms) + len(self.series.runs) * len(self.free_states)
+
+    def labels(self) -> list[str]:
+        """A name per unknown."""
+        states = [self.series.model.state_names[i] for i in self.free_states]
+        return [*self.names, *(term_label(t) for t in self.terms),
+                *(f"{s}0[{r}]" for r in range(len(self.series.runs)) for s in states)]
+
+    def start(self, values: Mapping[str, float] | None = None) -> FloatArray:
+        """Unknowns at the model's values (or ``values`` by label), terms at zero and initial
+        states at the first measured sample (the model's equilibrium where unmeasured)."""
+        model, labels = self.series.model, self.labels()
+        theta = np.zeros(self.size)
+        theta[: len(self.names)] = [float(getattr(model.params, n)) for n in self.names]
+        k = len(self.names) + len(self.terms)
+        for run in self.series.runs:
+            for i in self.free_states:
+                name = model.state_names[i]
+                theta[k] = (run.y[0, self.series.channels.index(name)]
+                            if name in self.series.channels else model.x0[i])
+                k += 1
+        for label, value in (values or {}).items():
+            if label in labels:
+                theta[labels.index(label)] = value
+        return theta
+
+    def bounds(self) -> tuple[FloatArray, FloatArray]:
+        """Bounds of the unknowns (:func:`parameter_bounds` for the parameters; the rest
+        free)."""
+        low = np.full(self.size, -np.inf)
+        low[:len(self.names)] = parameter_bounds(self.series.model, self.names)[0]
+        return low, np.full(self.size, np.inf)
+
+    def simulate(self, theta: FloatArray, run: int, steps: int | None = None) -> FloatArray:
+        """Measured channels ``(B, T, m)`` of the free simulations with unknowns ``theta``
+        ``(B, P)`` over run ``run`` (its first ``steps`` samples)."""
+        series, model = self.series, self.series.model
+        theta = np.atleast_2d(theta)
+        n_names, n_terms = len(self.names), len(self.terms)
+        affine = _affine(model, {n: theta[:, k] for k, n in enumerate(self.names)},
+                         theta.shape[0])
+        coefficients = theta[:, n_names:n_names + n_terms]
+        free = self.free_states
+        start = n_names + n_terms + run * len(free)
+        x = np.tile(model.x0, (theta.shape[0], 1))
+        x[:, free] = theta[:, start:start + len(free)]
+        data = series.runs[run]
+        u = data.u
+        for effect in self.inputs:
+            u = applied_inputs(effect, model, u, series.dt)
+        states = [(k, t, model.state_names.index(t.target)) for k, t in enumerate(self.terms)
+                  if t.kind == "state"]
+        channel_index = [model.output_names.index(c) for c in series.channels]
+        steps = len(data.time) if steps is None else steps
+        out = np.empty((theta.shape[0], steps, len(series.channels)))
+        h = series.dt / series.substeps
+        with np.errstate(all="ignore"):  # a wild trial value may overflow: caught below
+            for k in range(steps):
+                out[:, k] = model.output(x)[:, channel_index]
+                uk = np.broadcast_to(u[k], (theta.shape[0], u.shape[1]))
+                forced = affine.forced(uk)
+
+                def f(z: FloatArray, t: float, uk: FloatArray = uk,
+                      forced: FloatArray = forced) -> FloatArray:
+                    z_dot = affine.rhs(z, forced)
+                    for j, term, i in states:
+                        z_dot[:, i] += coefficients[:, j] * state_term(term, model, z, uk, t)
+                    return z_dot
+
+                x = rk4(f, x, h, series.substeps, t=float(data.time[k]))
+        for j, term in enumerate(self.terms):
+            if term.kind == "output":
+                out[:, :, series.channels.index(term.target)] += coefficients[:, j, None]
+        return out
+
+    def residuals(self, theta: FloatArray, rows: Sequence[BoolArray | None]) -> FloatArray:
+        """Residuals ``(B, L)`` in signal scales, each run's selected samples weighted so its
+        mean square counts once (runs alike; the sample rate does not matter); runs whose
+        ``rows`` entry is None are skipped."""
+        series = self.series
+        used = [r for r, mask in enumerate(rows) if mask is not None]
+        parts = []
+        for r in used:
+            mask = rows[r]
+            last = int(np.flatnonzero(mask)[-1]) + 1
+            simulated = self.simulate(theta, r, last)[:, mask[:last]]
+            error = (simulated - series.runs[r].y[mask]) / series.scale
+            weight = 1 / math.sqrt(max(int(mask.sum()), 1) * len(series.channels) * len(used))
+            parts.append(error.reshape(error.shape[0], -1) * weight)
+        out = np.concatenate(parts, axis=1)
+        return np.clip(np.nan_to_num(out, nan=DIVERGED), -DIVERGED, DIVERGED)
+
+
+def term_label(term: Effect) -> str:
+    """``effect(target)`` (with its source or form where it has one)."""
+    source = term.parameters.get("source")
+    return f"{term.effect}({term.target}{', ' + source if source else ''})"
+
+
+def basis(effect: str, target: str, **text: str) -> Effect:
+    """A catalogue term with unit coefficient (its coefficient is an unknown of a fit)."""
+    key = "b" if effect in ("current", "sensor_bias") else "c"
+    return Effect(effect, target, {key: 1.0, **text})
+
+
+class _affine:
+    """The model's ``rhs`` with a parameter set per batch row, split as ``rhs(x, forced(u))``.
+    A linear model becomes its matrices, read off ``rhs`` exactly (``A x + B u + c`` per row:
+    a few array operations per call instead of the model's dozens)."""
+
+    def __init__(self, model: VehicleModel, values: Mapping[str, FloatArray],
+                 batch: int) -> None:
+        if not values:
+            self._rhs = model.rhs
+        elif model.row_parameters:
+            self._rhs = model.with_rows(**values).rhs
+        else:
+            self._rhs = lambda x, u: model.rhs_with(x, u, None, values)
+        self.matrices = None
+        if model.is_linear:
+            n, m = len(model.state_names), len(model.input_names)
+            x0, u0 = np.zeros((batch, n)), np.zeros((batch, m))
+            c = self._rhs(x0, u0)
+            A = np.stack([self._rhs(x0 + e, u0) - c for e in np.eye(n)], axis=-1)
+            B = np.stack([self._rhs(x0, u0 + e) - c for e in np.eye(m)], axis=-1)
+            self.matrices = (A, B, c)
+
+    def forced(self, u: FloatArray) -> FloatArray:
+        """What the input contributes: ``B u + c`` (linear), or the input itself."""
+        if self.matrices is None:
+            return u
+        _, B, c = self.matrices
+        return np.einsum("bij,bj->bi", B, u) + c
+
+    def rhs(self, x: FloatArray, forced: FloatArray) -> FloatArray:
+        if self.matrices is None:
+            return self._rhs(x, forced)
+        return np.einsum("bij,bj->bi", self.matrices[0], x) + forced
+
+
+def parameter_bounds(model: VehicleModel, names: Sequence[str]) -> tuple[FloatArray, FloatArray]:
+    """Bounds for fitting ``names``: a parameter the model refuses to make negative (or zero)
+    stays positive; the rest are free."""
+    low = np.full(len(names), -np.inf)
+    for k, name in enumerate(names):
+        value = float(getattr(model.params, name))
+        if value > 0 and not _accepts(model, name, -value):
+            low[k] = 0.0 if _accepts(model, name, 0.0) else value * 1e-6
+    return low, np.full(len(names), np.inf)
+
+
+def _accepts(model: VehicleModel, name: str, value: float) -> bool:
+    try:
+        model.with_params(**{name: value})
+    except ValueError:
+        return False
+    return True
+
+
+# -- fitting --------------------------------------------------------------------------------------
+@dataclass
+class Fit:
+    """A least-squares fit of a structure.
+
+    :param theta: the unknowns.  :param cost: mean square residual (signal scales).
+    :param std: standard deviations of the unknowns (from the effective sample count).
+    :param correlation: their correlation matrix.  :param converged: the solver's verdict.
+    """
+
+    structure: Structure
+    theta: FloatArray
+    cost: float
+    std: FloatArray
+    correlation: FloatArray
+    converged: bool
+    message: str
+    jacobian: FloatArray = field(repr=False)
+
+    def values(self) -> dict[str, float]:
+        return dict(zip(self.structure.labels(), self.theta.tolist(), strict=True))
+
+
+def fit(structure: Structure, rows: Sequence[BoolArray | None],
+        theta0: FloatArray | None = None, fixed: Sequence[int] = ()) -> Fit:
+    """Fit the unknowns of ``structure`` to the selected samples (bounded trust region, exact
+    batched central-difference Jacobian); ``fixed`` unknowns keep their ``theta0`` values."""
+    theta0 = structure.start() if theta0 is None else np.asarray(theta0, dtype=float)
+    free = np.setdiff1d(np.arange(structure.size), np.asarray(fixed, dtype=int))
+    low, high = structure.bounds()
+    cache: dict[bytes, tuple[FloatArray, FloatArray]] = {}
+
+    def full(z: FloatArray) -> FloatArray:
+        theta = theta0.copy()
+        theta[free] = z
+        return theta
+
+    def evaluate(z: FloatArray) -> tuple[FloatArray, FloatArray]:
+        key = z.tobytes()
+        if key not in cache:
+            cache.clear()
+            cache[key] = jacobian(structure, full(z), rows, free)
+        return cache[key]
+
+    z0 = np.clip(theta0[free], low[free], high[free])
+    if not free.size:
+        r, J = structure.residuals(theta0[None], rows)[0], np.zeros((0, 0))
+        return Fit(structure, theta0, float(r @ r), np.zeros(0), np.zeros((0, 0)), True, "", J)
+    result = optimize.least_squares(lambda z: evaluate(z)[0], z0, jac=lambda z: evaluate(z)[1],
+                                    bounds=(low[free], high[free]), method="trf",
+                                    x_scale="jac", max_nfev=60)
+    r, J = evaluate(result.x)
+    std, correlation = _covariance(r, J, structure, rows)
+    std_full = np.zeros(structure.size)
+    std_full[free] = std
+    corr_full = np.eye(structure.size)
+    corr_full[np.ix_(free, free)] = correlation
+    return Fit(structure, full(result.x), float(r @ r), std_full, corr_full,
+               bool(result.success and np.all(np.abs(r) < DIVERGED)), result.message, J)
+
+
+def jacobian(structure: Structure, theta: FloatArray, rows: Sequence[BoolArray | None],
+             free: NDArray[np.int_] | None = None) -> tuple[FloatArray, FloatArray]:
+    """Residuals ``(L,)`` and their central-difference Jacobian ``(L, len(free))`` (default:
+    every unknown) from one batched simulation."""
+    free = np.arange(structure.size) if free is None else free
+    steps = 1e-6 * np.maximum(np.abs(theta[free]), 1e-3)
+    batch = np.tile(theta, (1 + 2 * len(free), 1))
+    for k, (i, s) in enumerate(zip(free, steps, strict=True)):
+        batch[1 + 2 * k, i] += s
+        batch[2 + 2 * k, i] -= s
+    r = structure.residuals(batch, rows)
+    return r[0], ((r[1::2] - r[2::2]) / (2 * steps[:, None])).T
+
+
+def _covariance(r: FloatArray, J: FloatArray, structure: Structure,
+                rows: Sequence[BoolArray | None]) -> tuple[FloatArray, FloatArray]:
+    """Standard deviations and correlations of the unknowns: ``cost (J'J)^-1 / (N_eff - P)``
+    with ``N_eff`` the number of independent samples the residuals hold (their count over the
+    integrated autocorrelation time): free-simulation errors are smooth, not white."""
+    n_eff = sum(_effective_samples(structure, r_, mask) for r_, mask in _split(r, structure, rows))
+    dof = max(n_eff - J.shape[1], 1.0)
+    norms = np.linalg.norm(J, axis=0)
+    scale = np.where(norms > 0, norms, 1.0)
+    values, vectors = np.linalg.eigh((J / scale).T @ (J / scale))
+    # a direction the residuals hardly change along (a combination the records do not hold)
+    # has unbounded variance; pinv would report it as perfectly known
+    null = values < 1e-10 * max(float(values[-1]), 1e-300)
+    inverse = np.where(null, 0.0, 1 / np.where(null, 1.0, values))
+    covariance = (vectors * inverse) @ vectors.T / np.outer(scale, scale) * float(r @ r) / dof
+    std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    unseen = (norms == 0) | np.any(np.abs(vectors[:, null]) > 1e-3, axis=1)
+    std[unseen] = np.inf
+    finite = np.where(np.isfinite(std) & (std > 0), std, 1.0)
+    correlation = covariance / np.outer(finite, finite)
+    correlation[unseen] = 0.0
+    correlation[:, unseen] = 0.0
+    np.fill_diagonal(correlation, 1.0)
+    return std, np.clip(correlation, -1.0, 1.0)
+
+
+def _split(r: FloatArray, structure: Structure, rows: Sequence[BoolArray | None]):
+    m, k = len(structure.series.channels), 0
+    for mask in rows:
+        if mask is None:
+            continue
+        n = int(mask.sum()) * m
+        yield r[k:k + n].reshape(-1, m), mask
+        k += n
+
+
+def _effective_samples(structure: Structure, r: FloatArray, mask: BoolArray) -> float:
+    """Samples over the integrated autocorrelation time of the residuals (per channel, the
+    slowest), so that resampling a record does not change its evidence."""
+    tau = 1.0
+    for e in r.T:
+        e = e - e.mean()
+        if not np.any(e):
+            continue
+        acf = signal.correlate(e, e, mode="full", method="fft")[len(e) - 1:]
+        acf = acf / acf[0]
+        stop = int(np.argmax(acf < 0)) or len(acf)
+        tau = max(tau, 1 + 2 * float(np.sum(acf[1:stop])))
+    return len(r) / tau

@@ -1,0 +1,168 @@
+"""The free-simulation diagnosis of model tests: decays and zigzag series (seeded synthetic
+records whose truth is known; the real ones are in benchmarks/real_recordings.py)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from estimators.diagnosis import diagnose
+from estimators.diagnosis.modes import decay_analysis, model_modes
+from estimators.diagnosis.output_error import Series, Structure, basis
+from marine_envs.models import get_model
+from marine_envs.models.effects import Effect, EffectModel
+from marine_envs.models.integrate import rk4
+from marine_envs.recording import Recording
+
+
+def decay(effects=(), wn=1.0, zeta=0.02, phi0=0.3, duration=60.0, dt=0.1, noise=1e-4,
+          seed=0) -> Recording:
+    """A free roll decay of the USV (only phi measured) with ``effects`` in the truth."""
+    truth = EffectModel(get_model("usv", wn=wn, zeta=zeta), effects)
+    n = int(round(duration / dt)) + 1
+    x, u = np.array([0.0, 0.0, 0.0, 0.0, phi0]), np.zeros(1)
+    phi = np.empty(n)
+    for k in range(n):
+        phi[k] = x[4]
+        x = rk4(lambda z, t: truth.rhs(z, u, None, t), x, dt / 4, 4)
+    phi += noise * np.random.default_rng(seed).standard_normal(n)
+    time = np.arange(n) * dt
+    return Recording(pd.DataFrame({"time": time, "delta": 0.0, "phi": phi}), model="usv")
+
+
+def zigzag(amplitude: float, c3: float = 0.0, K: float = -0.1, T: float = 8.0,
+           duration: float = 100.0, dt: float = 0.2, seed: int = 0,
+           command: bool = False) -> Recording:
+    """A zigzag amplitude/amplitude of a Nomoto ship with a Norrbin term ``c3 r^3``, rudder
+    rate 15 deg/s, r and psi measured with small noise; the recorded rudder is the actual one,
+    or the (square-wave) command."""
+    truth = EffectModel(get_model("nomoto", K=K, T=T),
+                        [Effect("nonlinear_damping", "r", {"c": c3})] if c3 else [])
+    rate, a = math.radians(15.0) * dt, math.radians(amplitude)
+    x, delta, order = np.zeros(2), 0.0, a
+    rows = []
+    for k in range(int(duration / dt)):
+        heading = -x[1]  # K < 0: a positive rudder turns to negative psi
+        if order > 0 and heading >= a:
+            order = -a
+        elif order < 0 and heading <= -a:
+            order = a
+        delta += float(np.clip(order - delta, -rate, rate))
+        rows.append((k * dt, order if command else delta, x[0], x[1]))  # held over the step
+        u = np.array([delta])
+        x = rk4(lambda z, t, u=u: truth.rhs(z, u, None, t), x, dt / 2, 2)
+    data = pd.DataFrame(rows, columns=["time", "delta", "r", "psi"])
+    rng = np.random.default_rng(seed)
+    data["r"] += 1e-4 * rng.standard_normal(len(data))
+    data["psi"] += 1e-4 * rng.standard_normal(len(data))
+    return Recording(data, model="nomoto")
+
+
+# -- reading a decay ------------------------------------------------------------------------------
+def test_decay_analysis_reads_a_linear_decay():
+    rec = decay(wn=1.2, zeta=0.03, noise=0.0)
+    found = decay_analysis(rec.time, rec.measurements[:, 0], 1e-6)
+    assert found.omega_n == pytest.approx(1.2, rel=0.01)
+    assert found.zeta == pytest.approx(0.03, rel=0.05)
+    amplitude, decrement = found.extinction()
+    assert np.ptp(decrement) < 0.01  # linear damping: the extinction curve is flat
+
+
+def test_no_extremum_is_lost_and_the_cut_last_half_cycle_is_not_read():
+    """601 samples: the tail's median is one of them, exactly at the offset near a crossing."""
+    t = np.arange(0.0, 60.05, 0.1)
+    y = np.exp(-0.05 * t) * (np.cos(t) + 0.05 * np.sin(t))
+    found = decay_analysis(t, y, 1e-4)
+    assert np.allclose(np.diff(found.times), np.pi, atol=0.01)
+    assert found.times[-1] < t[-1] - 1.0
+
+
+def test_model_modes_are_the_ones_the_channels_see():
+    usv = get_model("usv", wn=0.8, zeta=0.1)
+    roll = [m for m in model_modes(usv, ["phi"]) if m[1] < 1]
+    assert roll == [pytest.approx((0.8, 0.1))]
+    assert all(m[1] >= 1 for m in model_modes(get_model("nomoto"), ["r"]))
+
+
+def test_batched_simulation_equals_one_simulation_per_parameter_set():
+    series = Series.from_recordings([decay()], get_model("usv"), ["wn", "zeta"])
+    structure = Structure(series, ("wn", "zeta"), (basis("quadratic_damping", "p"),))
+    theta = np.tile(structure.start(), (3, 1))
+    theta[:, 0] = [0.8, 1.0, 1.2]
+    theta[:, 2] = [0.0, -0.3, -1.0]
+    batch = structure.simulate(theta, 0)
+    for row, values in zip(batch, theta, strict=True):
+        np.testing.assert_allclose(row, structure.simulate(values[None], 0)[0], rtol=1e-12)
+
+
+# -- decays ---------------------------------------------------------------------------------------
+def test_amplitude_dependent_damping_is_found_from_a_wrong_start():
+    rec = decay([Effect("quadratic_damping", "p", {"c": -0.4})])
+    # the USV's defaults (wn 0.63, zeta 0.094) are far from the truth (1.0, 0.02)
+    diagnosis = diagnose(rec, "usv", calibrate="wn,zeta")
+    assert diagnosis.fit["method"] == "free simulation"
+    assert diagnosis.calibration["wn"] == pytest.approx(1.0, rel=0.02)
+    top = diagnosis.findings[0]
+    assert (top.effect, top.target) in {("quadratic_damping", "p"), ("nonlinear_damping", "p")}
+    assert diagnosis.fit["improvement"] >= 0.5
+    if top.effect == "quadratic_damping":
+        assert top.parameters["c"] == pytest.approx(-0.4, rel=0.3)
+
+
+def test_a_linear_decay_is_explained_and_nothing_is_claimed():
+    diagnosis = diagnose(decay(noise=3e-4, seed=3), "usv", calibrate="wn,zeta")
+    assert diagnosis.mismatch is False
+    assert not diagnosis.findings
+    quality = diagnosis.calibration_quality["parameters"]
+    assert quality["zeta"]["value"] == pytest.approx(0.02, rel=0.1)
+    assert all(q["status"] == "identified" for q in quality.values())
+
+
+def test_the_same_answer_at_another_sample_rate():
+    effect = [Effect("quadratic_damping", "p", {"c": -0.4})]
+    answers = [diagnose(decay(effect, dt=dt), "usv", calibrate="wn,zeta") for dt in (0.1, 0.02)]
+    assert answers[0].findings[0].effect == answers[1].findings[0].effect
+    assert answers[0].calibration["wn"] == pytest.approx(answers[1].calibration["wn"], rel=2e-3)
+
+
+def test_a_parameter_the_record_cannot_see_is_said_to_be_unidentifiable():
+    diagnosis = diagnose(decay(), "usv", params={"wn": 1.0, "zeta": 0.02},
+                         calibrate="zeta,Kdr")
+    status = diagnosis.calibration_quality["parameters"]["Kdr"]["status"]
+    assert status.startswith("not identifiable")
+    assert "not identifiable" in diagnosis.summary()
+
+
+def test_a_model_with_the_wrong_natural_frequency_is_named_with_the_parameter_to_set():
+    diagnosis = diagnose(decay(), "usv")  # wn 0.63 in the model, 1.0 in the record
+    assert diagnosis.mismatch is None
+    assert "1 rad/s" in diagnosis.reason and "calibrate wn" in diagnosis.reason
+
+
+# -- a zigzag series ------------------------------------------------------------------------------
+def test_norrbin_damping_is_found_across_a_zigzag_series():
+    series = [zigzag(a, c3=-3.0, seed=k) for k, a in enumerate((10.0, 20.0, 35.0))]
+    diagnosis = diagnose(series, "nomoto", calibrate="K,T")
+    top = diagnosis.findings[0]
+    assert top.target == "r" and top.effect in {"nonlinear_damping", "quadratic_damping"}
+    assert "leave one recording out" in diagnosis.fit["validation"]
+    assert diagnosis.fit["improvement"] >= 0.3
+    assert diagnosis.fit["after"]["rmse"]["psi"] < 0.5 * diagnosis.fit["before"]["rmse"]["psi"]
+
+
+def test_a_rudder_rate_limit_is_found_from_the_commanded_rudder():
+    series = [zigzag(a, command=True, seed=k) for k, a in enumerate((10.0, 20.0))]
+    diagnosis = diagnose(series, "nomoto", calibrate="K,T")
+    top = diagnosis.findings[0]
+    assert (top.effect, top.target) == ("input_rate_limit", "delta")
+    assert math.degrees(top.parameters["rate"]) == pytest.approx(15.0, rel=0.3)
+
+
+def test_a_series_must_measure_the_same_channels():
+    a, b = zigzag(10.0), zigzag(20.0)
+    b = Recording(b.data.drop(columns=["r"]), model="nomoto")
+    with pytest.raises(ValueError, match="same channels"):
+        diagnose([a, b], "nomoto")
