@@ -78,6 +78,9 @@ def test_no_extremum_is_lost_and_the_cut_last_half_cycle_is_not_read():
     found = decay_analysis(t, y, 1e-4)
     assert np.allclose(np.diff(found.times), np.pi, atol=0.01)
     assert found.times[-1] < t[-1] - 1.0
+    mid_swing = decay_analysis(t, np.exp(-0.05 * t) * np.cos(t + 0.7), 1e-4)
+    peak = np.pi - 0.7 - np.arctan(0.05)  # the first extremum, not the first sample
+    assert mid_swing.times[0] == pytest.approx(peak, abs=0.01)
 
 
 def test_model_modes_are_the_ones_the_channels_see():

@@ -107,9 +107,8 @@ def _diagnosis(comparison: Comparison, calibrate: Sequence[str],
                           model_check=check or {}, comparison=comparison)
     diagnosis.calibration_quality = calibration_quality(comparison.nominal, calibrate)
     if findings and calibrate:  # the same parameters refitted with the findings
-        refitted = calibration_quality(comparison.final, calibrate)["parameters"]
-        diagnosis.calibration_quality["with_findings"] = {
-            n: {"value": q["value"], "std": q["std"]} for n, q in refitted.items()}
+        diagnosis.calibration_quality["with_findings"] = calibration_quality(
+            comparison.final, calibrate)["parameters"]
     diagnosis.channels = _channels(nominal)
     improvement = comparison.improvement(nominal, final)
     diagnosis.fit = {

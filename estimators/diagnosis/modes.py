@@ -78,6 +78,8 @@ def decay_analysis(time: FloatArray, y: FloatArray, noise: float,
         k = a + int(np.argmax(np.abs(z[a:b])))
         if abs(z[k]) < MIN_EXTREMUM_SNR * noise:
             break
+        if k == 0 and not _peaks_at_start(z):
+            continue  # the record starts mid-swing: its first sample is no extremum
         t_peak, value = _refined_peak(time, z, k)
         times.append(t_peak)
         values.append(value + offset)
@@ -105,8 +107,21 @@ def _level(extrema: FloatArray, guess: float) -> float:
     return float(np.median(levels)) if levels.size >= 3 else guess
 
 
+def _peaks_at_start(z: FloatArray) -> bool:
+    """The parabola through the first three samples peaks within a sample of the first
+    (a release from rest), not beyond it (a swing already under way)."""
+    a, b, c = z[:3]
+    curvature = a - 2 * b + c
+    return curvature != 0 and -2.0 <= 0.5 * (a - c) / curvature <= -0.5
+
+
 def _refined_peak(time: FloatArray, z: FloatArray, k: int) -> tuple[float, float]:
-    """The extremum at sample ``k`` refined by a parabola through its neighbours."""
+    """The extremum at sample ``k`` refined by a parabola through its neighbours (the first
+    sample's through the next two)."""
+    if k == 0 and len(z) > 2:
+        a, b, c = z[:3]
+        s = max(0.5 * (a - c) / (a - 2 * b + c), -2.0)
+        return float(time[1] + s * (time[1] - time[0])), float(b - 0.25 * (a - c) * s)
     if 0 < k < len(z) - 1:
         a, b, c = z[k - 1], z[k], z[k + 1]
         curvature = a - 2 * b + c

@@ -409,7 +409,7 @@ def fit(structure: Structure, rows: Sequence[BoolArray | None],
         return Fit(structure, theta0, float(r @ r), np.zeros(0), np.zeros((0, 0)), True, "", J)
     result = optimize.least_squares(lambda z: evaluate(z)[0], z0, jac=lambda z: evaluate(z)[1],
                                     bounds=(low[free], high[free]), method="trf",
-                                    x_scale="jac", max_nfev=60)
+                                    x_scale="jac", max_nfev=60, ftol=1e-6, xtol=1e-6)
     r, J = evaluate(result.x)
     std, correlation = _covariance(r, J, structure, rows)
     std_full = np.zeros(structure.size)

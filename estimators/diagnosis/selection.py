@@ -219,8 +219,10 @@ def select(residuals: Residuals, config: DiagnosisConfig = DiagnosisConfig()) ->
         _confidences(scored)
         if round_ == 0:
             ranking = scored
-        best = next(iter(scored), None)
-        if best is None or best.p_value > config.alpha or best.gain <= 0:
+        # the best *significant* family: a lower-ranked one may be significant when the top
+        # one is not (its gain is larger but spread over too few blocks)
+        best = next((s for s in scored if s.p_value <= config.alpha and s.gain > 0), None)
+        if best is None:
             break
         findings.append(best)
     if len(findings) > 1:

@@ -10,7 +10,8 @@ is minus the task's quadratic cost.
 from __future__ import annotations
 
 import copy
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -21,6 +22,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
+from ..models.effects import Effect, read_effects
 from .core import Simulator
 from .rendering import TimeSeriesRenderer
 
@@ -30,6 +32,18 @@ _ONE = np.array([0])
 RendererFactory = Callable[[], Any]
 #: A vehicle's own renderer class, built from its model.
 Renderer = Callable[[Any], Any]
+
+
+#: Effects for an environment: objects, their dicts, or a diagnosis JSON's path.
+EffectsArg = Sequence[Effect | Mapping[str, Any]] | str | Path
+
+
+def _with_effects(sim: Simulator, effects: EffectsArg) -> Simulator:
+    """``sim`` with the physics of ``effects`` added (:meth:`Simulator.add_effects`)."""
+    found = read_effects(effects)
+    if found:
+        sim.add_effects(found)
+    return sim
 
 
 def _check_render_mode(render_mode: str | None, metadata: dict[str, Any]) -> None:
@@ -58,6 +72,9 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     environment's) and, optionally, :attr:`renderer`; :func:`vector_env` makes its vector twin.
     Actions are normalised to [-1, 1] per input and mapped linearly to the physical limits;
     larger actions are clipped (``info["action_clipped"]``), NaN or inf raises ``ValueError``.
+    ``effects=`` (every environment) adds physics the nominal model leaves out: catalogue
+    effects, their dicts or a diagnosis JSON's path, e.g. ``gym.make(ENV_ID,
+    effects="diagnosis.json")`` to train on the vessel as recorded.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -66,9 +83,10 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     #: The vehicle's own renderer class (built from the model), or None for strip charts.
     renderer: ClassVar[Renderer | None] = None
 
-    def __init__(self, render_mode: str | None = None, **kwargs: Any) -> None:
+    def __init__(self, render_mode: str | None = None, effects: EffectsArg = (),
+                 **kwargs: Any) -> None:
         _check_render_mode(render_mode, self.metadata)
-        sim = self.make_simulator(**kwargs)
+        sim = _with_effects(self.make_simulator(**kwargs), effects)
         self.sim, self.render_mode = sim, render_mode
         self._make_renderer = _renderer(type(self).renderer, sim)
         self.metadata = {**self.metadata, "render_fps": round(1 / sim.dt)}
@@ -101,7 +119,9 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
         # views, not copies: the simulator replaces these arrays every step, never writes them
         sim = self.sim
         return {"state": sim.x[0], "action_applied": sim.u[0],
-                "action_clipped": bool(sim.clipped[0]), "disturbance": sim.d[0],
+                "action_clipped": bool(sim.clipped[0]),
+                # without a sea the simulator never replaces d: a copy, not a shared view
+                "disturbance": sim.d[0] if sim.disturbances is not None else sim.d[0].copy(),
                 "measurement_mask": sim.sensors.valid[0].copy(),
                 "time": float(sim.steps[0]) * sim.dt}
 
@@ -199,7 +219,8 @@ class MarineVectorEnv(VectorEnv):
     def _info(self) -> dict[str, Any]:
         sim, m = self.sim, self._mask
         return {"state": sim.x, "_state": m, "action_applied": sim.u, "_action_applied": m,
-                "action_clipped": sim.clipped, "_action_clipped": m, "disturbance": sim.d,
+                "action_clipped": sim.clipped, "_action_clipped": m,
+                "disturbance": sim.d if sim.disturbances is not None else sim.d.copy(),
                 "_disturbance": m, "measurement_mask": sim.sensors.valid,
                 "_measurement_mask": m, "time": sim.steps * sim.dt, "_time": m}
 
@@ -228,8 +249,9 @@ def vector_env(single: type[MarineEnv], max_episode_steps: int = 1000) -> type[M
 
     def __init__(self: MarineVectorEnv, num_envs: int = 1,
                  max_episode_steps: int | None = max_episode_steps,
-                 render_mode: str | None = None, **kwargs: Any) -> None:
-        sim = single.make_simulator(**kwargs)
+                 render_mode: str | None = None, effects: EffectsArg = (),
+                 **kwargs: Any) -> None:
+        sim = _with_effects(single.make_simulator(**kwargs), effects)
         MarineVectorEnv.__init__(self, sim, num_envs, max_episode_steps, render_mode=render_mode,
                                  renderer=_renderer(single.renderer, sim))
 

@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..models import VehicleModel
+from ..models.effects import BatchActuators, Effect, ModelWithEffects
 from ..models.integrate import ExactStep, RK4Step
 from ..sea.processes import DisturbanceSource
 from ..sensors import SensorSuite, as_index, per_channel
@@ -178,6 +179,8 @@ class Simulator:
             raise ValueError(f"sensor channel(s) {unknown} are not outputs of model "
                              f"{model.name!r}: {', '.join(model.output_names)}")
         self.model, self.sensors, self.task = model, sensors, task
+        self.effects: tuple[Effect, ...] = ()
+        self.actuators: BatchActuators | None = None
         self.disturbances, self.disturbance_seed = disturbances, disturbance_seed
         self.dt, self.initial_state = dt, initial_state
         self.integrate = ExactStep(model, dt) if integrator == "exact" else RK4Step(model, dt,
@@ -202,6 +205,27 @@ class Simulator:
         reference = np.concatenate([task.x_ref, task.u_ref, np.zeros(n_d)])
         self._reference = reference if np.any(reference) else None
 
+    def add_effects(self, effects: Sequence[Effect]) -> None:
+        """Physics the nominal model leaves out (a diagnosis's findings): state effects enter
+        the equations (stepped by RK4 from then on), input effects sit between the action and
+        the model, sensor biases offset the measured channels. Call before :meth:`bind`."""
+        state = [e for e in effects if e.kind == "state"]
+        if state:
+            self.model = ModelWithEffects(self.model, state)
+            substeps = getattr(self.integrate, "substeps", 4)
+            self.integrate = RK4Step(self.model, self.dt, substeps)
+        inputs = [e for e in effects if e.kind == "input"]
+        self.actuators = BatchActuators(self.model, inputs, self.dt) if inputs else None
+        self.bias = np.zeros(len(self.sensors.channels))
+        for effect in effects:
+            if effect.kind == "output":
+                effect.check(self.model)
+                if effect.target not in self.sensors.channels:
+                    raise ValueError(f"sensor_bias: {effect.target!r} is not a measured "
+                                     f"channel: {', '.join(self.sensors.channels)}")
+                self.bias[self.sensors.channels.index(effect.target)] += effect.parameters["b"]
+        self.effects = tuple(effects)
+
     def bind(self, batch_size: int) -> None:
         """Allocate state for ``batch_size`` boats."""
         self.batch_size = batch_size
@@ -215,6 +239,8 @@ class Simulator:
         self.sensors.bind(batch_size)
         if self.disturbances is not None:
             self.disturbances.bind(batch_size)
+        if self.actuators is not None:
+            self.actuators.bind(batch_size)
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator],
               x0: ArrayLike | None = None) -> None:
@@ -232,6 +258,8 @@ class Simulator:
             self.disturbances.reset(idx, [np.random.default_rng(self.disturbance_seed)
                                           for _ in idx] if frozen else rngs)
         self.sensors.reset(idx, rngs)
+        if self.actuators is not None:
+            self.actuators.reset(idx)
 
     def apply(self, action: ArrayLike) -> None:
         """Map normalised actions (batch x actuators) in [-1, 1] to physical inputs.
@@ -264,6 +292,8 @@ class Simulator:
             self.clipped = self._never_clipped
         f = self.u_mid + self.u_scale * a
         self.u = f if self._allocation is None else f @ self._allocation
+        if self.actuators is not None:
+            self.u = self.actuators.step(self.u)
 
     def nominal_action(self) -> FloatArray:
         """The normalised action that applies the model's nominal input ``u0`` (for thrusters:
@@ -293,5 +323,7 @@ class Simulator:
         """Sensor outputs (batch x channels) of the current states."""
         outputs = self.x if self._outputs_are_states else self.model.output(self.x)
         true = outputs[:, self.measured]
+        if self.effects:
+            true = true + self.bias
         # the sensor chain overwrites its input: never hand it a view of the state
         return self.sensors.measure(true.copy() if true.base is outputs else true)

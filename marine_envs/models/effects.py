@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -267,6 +268,115 @@ class ActuatorStream:
                 a = float(applied_inputs(effect, self.model, u[None, :], self.dt)[0, j]) - u0
             u[j] = u0 + a
         return u
+
+
+# -- effects in an environment --------------------------------------------------------------------
+def read_effects(effects: Sequence[Effect | Mapping[str, Any]] | str | Any) -> list[Effect]:
+    """Effects from :class:`Effect` objects, their ``to_dict()`` forms, or the path of a
+    diagnosis JSON (its ``findings``).
+
+    :raises ValueError: a file that is not a diagnosis, or an entry that is not an effect.
+    """
+    import json
+
+    if isinstance(effects, str | Path):
+        try:
+            document = json.loads(Path(effects).read_text())
+        except (OSError, json.JSONDecodeError) as error:
+            raise ValueError(f"effects {effects}: cannot read a diagnosis JSON: {error}") from None
+        if not isinstance(document, dict) or "findings" not in document:
+            raise ValueError(f"effects {effects}: not a diagnosis JSON (no 'findings')")
+        effects = document["findings"]
+    out = []
+    for entry in effects:
+        if isinstance(entry, Effect):
+            out.append(entry)
+        elif isinstance(entry, Mapping) and {"effect", "target"} <= set(entry):
+            parameters = {k: v for k, v in entry.get("parameters", {}).items()
+                          if not k.startswith("with_")}
+            out.append(Effect(entry["effect"], entry["target"], parameters))
+            out += [Effect(k[len("with_"):], entry["target"], {"c": v})
+                    for k, v in entry.get("parameters", {}).items() if k.startswith("with_")]
+        else:
+            raise ValueError(f"effects: {entry!r} is not an Effect or "
+                             "{'effect', 'target', 'parameters'}")
+    return out
+
+
+class ModelWithEffects(VehicleModel):
+    """A vehicle model with state effects added to its equations: a model of its own (same
+    names, units, bounds and outputs) that an environment steps like any other (by RK4).
+
+    :param model: the nominal model.  :param effects: time-invariant state effects (not
+        ``wave_frequency``, whose forcing is a process of its own, nor ``parameter_change``).
+    :raises ValueError: another kind of effect, or a target the model does not have.
+    """
+
+    def __init__(self, model: VehicleModel, effects: Sequence[Effect]) -> None:
+        for effect in effects:
+            effect.check(model)
+            if effect.kind != "state" or effect.effect in ("wave_frequency",
+                                                           "parameter_change"):
+                raise ValueError(f"{effect.effect}: only time-invariant state effects enter "
+                                 "a model's equations")
+        super().__init__(model.params)
+        self.nominal, self.effects = model, tuple(effects)
+        for attr in ("name", "state_names", "input_names", "disturbance_names", "state_units",
+                     "input_units", "disturbance_units"):
+            setattr(self, attr, getattr(model, attr))
+        self._rows = [model.state_names.index(e.target) for e in self.effects]
+
+    x0 = property(lambda self: self.nominal.x0)
+    u0 = property(lambda self: self.nominal.u0)
+    u_bounds = property(lambda self: self.nominal.u_bounds)
+    output_names = property(lambda self: self.nominal.output_names)
+    output_units = property(lambda self: self.nominal.output_units)
+
+    def output(self, x: FloatArray) -> FloatArray:
+        return self.nominal.output(x)
+
+    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
+        x_dot = self.nominal.rhs(x, u, d)
+        x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
+        for i, effect in zip(self._rows, self.effects, strict=True):
+            x_dot[..., i] += state_term(effect, self.nominal, x, u, 0.0)
+        return x_dot
+
+    def with_params(self, **changes: float) -> ModelWithEffects:
+        return ModelWithEffects(self.nominal.with_params(**changes), self.effects)
+
+
+class BatchActuators:
+    """Input effects applied to a batch of boats one control period at a time (each boat keeps
+    its own delay line and rate-limited position); equal per boat to :class:`ActuatorStream`."""
+
+    def __init__(self, model: VehicleModel, effects: Sequence[Effect], dt: float) -> None:
+        for effect in effects:
+            effect.check(model)
+        self.model, self.dt = model, dt
+        self.effects = [e for e in effects if e.kind == "input"]
+
+    def bind(self, batch_size: int) -> None:
+        self.streams = [self._at_rest() for _ in range(batch_size)]
+
+    def reset(self, idx: Sequence[int]) -> None:
+        for i in idx:
+            self.streams[i] = self._at_rest()
+
+    def _at_rest(self) -> ActuatorStream:
+        """A stream whose actuators start at the nominal input: a rate-limited one moves from
+        there, a delay line is full of it."""
+        stream = ActuatorStream(self.model, self.effects, self.dt)
+        for s, effect in enumerate(self.effects):
+            if effect.effect == "input_rate_limit":
+                stream.previous[s] = 0.0
+            elif effect.effect == "input_delay":
+                stream.history[s] = [0.0] * (int(effect.parameters["tau"] / self.dt) + 3)
+        return stream
+
+    def step(self, commanded: FloatArray) -> FloatArray:
+        """The applied inputs ``(batch, n_u)`` for the commanded ones."""
+        return np.stack([s.step(c) for s, c in zip(self.streams, commanded, strict=True)])
 
 
 # -- a model with effects -------------------------------------------------------------------------
