@@ -2,16 +2,29 @@
 
 :func:`diagnose` locates the mismatch (channels, windows, band), names the physics the model left
 out as entries of the effect catalogue (:mod:`marine_envs.models.effects`), fits them with
-uncertainty and shows the improvement on held-out data. The package, bottom up:
+uncertainty and shows the improvement on held-out data. The package, bottom up; records in a
+seaway, judged by the nominal filter's innovations:
 
 * :mod:`.innovations` - the nominal filter's whitened innovations and their sensitivities;
 * :mod:`.residuals` - the nominal smoother, equation errors and the sea's noise model;
 * :mod:`.hypotheses` - every catalogue entry as a family of candidate terms fitted to them;
 * :mod:`.selection` - cross-validated, significance-tested selection of the families;
 * :mod:`.rollout` - multi-step predictions with and without the findings;
+
+model tests (decays, zigzags, lab runs, series of them), judged in free simulation:
+
+* :mod:`.modes` - a free decay's frequency, damping and extinction curve against the model's modes;
+* :mod:`.output_error` - recordings on the model's bandwidth, batched free simulations, fits;
+* :mod:`.comparison` - nested models refitted whole and compared on held-out data;
+* :mod:`.model_test` - the diagnosis of a series; :mod:`.model_test_report` and
+  :mod:`.model_test_figures` its report;
+
+and for both:
+
 * :mod:`.explain` - a finding in a naval architect's words;
-* :mod:`.api` - :func:`diagnose`, the checks of its inputs, :class:`Diagnosis` and its JSON;
-* :mod:`.report` - the Markdown report with figures;
+* :mod:`.result` - :class:`Diagnosis`, its findings, its JSON and summary;
+* :mod:`.api` - :func:`diagnose`: the checks of its inputs, and which way a record is judged;
+* :mod:`.report` - the Markdown report with figures (:mod:`.report_format`: what both share);
 * :mod:`.synthetic` - closed-loop recordings of any model with effects added;
 * :mod:`.cases` - the seeded acceptance set and how a diagnosis is scored on it.
 """

@@ -3,6 +3,8 @@
 1. Check the input: parameter overrides and the names to calibrate (a ``ValueError`` naming the
    entry, before any work); the model's channels, length, excitation, observability (a recording
    the tool cannot judge gets ``mismatch=None`` and the reason, never a confident wrong answer).
+   Model tests (a series, a free decay) go to :mod:`.model_test`, judged in free simulation;
+   the steps below are those of a record in a seaway.
 2. Optionally calibrate named nominal parameters first (so only what the model's *structure*
    leaves out remains).
 3. Smooth the record with the nominal model; locate the mismatch (channels, time windows,
@@ -17,7 +19,6 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -30,14 +31,15 @@ from marine_envs.models.effects import Effect
 from marine_envs.recording import Recording, read_recording
 
 from .explain import explain
+from .model_test import diagnose_series
 from .residuals import Residuals, estimate, white_noise_std
+from .result import Diagnosis, Finding
 from .rollout import Rollouts
 from .selection import (
     DiagnosisConfig,
     Evaluator,
     Fitted,
     Scored,
-    Selection,
     fit_findings,
     gain_test,
     select,
@@ -51,123 +53,6 @@ MIN_SAMPLES, MIN_DURATION = 300, 60.0
 METHODS = ("auto", "free", "innovations")
 #: A channel moves "beyond its noise" when its spread exceeds this many noise deviations.
 MIN_SIGNAL_TO_NOISE = 5.0
-
-
-@dataclass
-class Finding:
-    """One effect the recording supports (the JSON's ``findings`` entries).
-
-    :param effect: catalogue name.  :param target: state, input or channel it acts on.
-    :param parameters: fitted values (SI units, the catalogue's sign convention).
-    :param std: their standard deviations.  :param confidence: in [0, 1].
-    :param improvement: held-out share of the excess prediction error this term removes alone.
-    :param explanation: what it means, in words.
-    """
-
-    effect: str
-    target: str
-    parameters: dict[str, Any]
-    std: dict[str, float]
-    confidence: float
-    improvement: float
-    explanation: str
-    standard_form: dict[str, float] = field(default_factory=dict)
-
-    def as_effect(self) -> Effect:
-        return Effect(self.effect, self.target, self.parameters)
-
-
-@dataclass
-class Diagnosis:
-    """The answer of :func:`diagnose`; :meth:`to_dict` is the documented JSON.
-
-    ``mismatch`` is True when a finding is claimed, False when nothing significant is found and
-    None when the recording cannot be judged (``reason`` says why).
-    """
-
-    model: str
-    mismatch: bool | None
-    reason: str = ""
-    channels: list[dict[str, Any]] = field(default_factory=list)
-    windows: list[dict[str, Any]] = field(default_factory=list)
-    band: dict[str, float] | None = None
-    findings: list[Finding] = field(default_factory=list)
-    unconfirmed: list[Finding] = field(default_factory=list)
-    fit: dict[str, Any] = field(default_factory=dict)
-    calibration: dict[str, float] = field(default_factory=dict)
-    model_check: dict[str, Any] = field(default_factory=dict)
-    calibration_quality: dict[str, Any] = field(default_factory=dict)
-    unexplained: dict[str, Any] = field(default_factory=dict)
-    alternatives: list[dict[str, Any]] = field(default_factory=list)
-    residuals: Residuals | None = field(default=None, repr=False)
-    rollouts: Rollouts | None = field(default=None, repr=False)
-    selection: Selection | None = field(default=None, repr=False)
-    comparison: Any = field(default=None, repr=False)  # .comparison.Comparison (model tests)
-
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON document (see the issue's schema), with plain Python numbers; also
-        ``unconfirmed`` findings, the ``calibration`` and the ``noise_model`` (each force
-        equation's coloured forcing: correlation time, s, and std, state units per s)."""
-        out = {"model": self.model, "mismatch": self.mismatch, "channels": self.channels,
-               "windows": self.windows, "band": self.band,
-               "findings": [_finding_dict(f) for f in self.findings], "fit": self.fit}
-        if self.unconfirmed:
-            out["unconfirmed"] = [_finding_dict(f) for f in self.unconfirmed]
-        if self.reason:
-            out["reason"] = self.reason
-        if self.calibration:
-            out["calibration"] = self.calibration
-        for key in ("calibration_quality", "model_check", "unexplained", "alternatives"):
-            if getattr(self, key):
-                out[key] = getattr(self, key)
-        if self.residuals is not None and self.residuals.forcing:
-            names = self.residuals.model.state_names
-            out["noise_model"] = [{"equation": names[f.state], "correlation_time": f.tau,
-                                   "std": math.sqrt(f.variance)}
-                                  for f in self.residuals.forcing]
-        return json.loads(json.dumps(out, default=_plain))
-
-    def to_json(self, path: str | Path | None = None) -> str:
-        text = json.dumps(self.to_dict(), indent=2)
-        if path is not None:
-            Path(path).write_text(text + "\n")
-        return text
-
-    def summary(self) -> str:
-        """A few lines for a terminal."""
-        if self.mismatch is None:
-            return f"{self.model}: cannot diagnose: {self.reason}"
-        withdrawn = [f"  withdrawn, not confirmed on held-out data: {f.effect} on {f.target} "
-                     f"(improvement {f.improvement:.0%})" for f in self.unconfirmed]
-        lines = [f"  calibrated {n} = {_fmt(q['value'])}"
-                 + (f" ± {_fmt(q['std'])}" if "std" in q else "") + f": {q['status']}"
-                 for n, q in self.calibration_quality.get("parameters", {}).items()]
-        lines += [f"  {' and '.join(c['parameters'])}: correlation {c['correlation']:+.3f}, "
-                  f"{c['status']}" for c in self.calibration_quality.get("correlations", [])]
-        lines += [f"  refitted with the findings, {n} = {_fmt(q['value'])}: {q['status']}"
-                  for n, q in self.calibration_quality.get("with_findings", {}).items()
-                  if q["status"] != "identified"]
-        if not self.mismatch:
-            return "\n".join([f"{self.model}: no significant mismatch: the nominal model "
-                              "explains the record", *lines, *withdrawn])
-        lines.insert(0, f"{self.model}: mismatch found" if self.findings else
-                     f"{self.model}: mismatch, unexplained by the catalogue")
-        for k, f in enumerate(self.findings, 1):
-            values = ", ".join(f"{n}={_fmt(v)}" + (f" ± {_fmt(f.std[n])}" if n in f.std else "")
-                               for n, v in f.parameters.items())
-            lines.append(f"  {k}. {f.effect} on {f.target} ({values}), confidence "
-                         f"{f.confidence:.2f}: {f.explanation}")
-        improvement = self.fit.get("improvement", 0)
-        if self.findings:
-            lines.append("  held-out improvement: " + (improvement if isinstance(
-                improvement, str) else f"{improvement:.0%}"))
-        for channel, left in self.unexplained.items():
-            lines.append(f"  unexplained in {channel}: {_with_unit(left['rmse'], left['unit'])}"
-                         f" RMS held-out ({left['share_of_signal']:.0%} of the signal)")
-        for alt in self.alternatives:
-            lines.append(f"  {alt['equally']} explains the data as well as {alt['chosen']}; "
-                         f"to separate them: {alt['separate_by']}")
-        return "\n".join(lines + withdrawn)
 
 
 def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path],
@@ -187,8 +72,8 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
     :param config: the sea-record search's configuration (one default for every case).
     :param method: ``"free"``: judge in free simulation (model tests: decays, zigzags, lab
         runs; :mod:`.model_test`); ``"innovations"``: the smoother and filter innovations of
-        a record in a seaway; ``"auto"``: free simulation for a series, a free decay (inputs
-        held) or a record too short for the innovations, the innovations otherwise.
+        a record in a seaway; ``"auto"``: free simulation for a series or a free decay (inputs
+        held), the innovations otherwise.
     :param log: called with a line on what the (seconds-long) search is doing.
     :raises ValueError: invalid ``params``, ``calibrate`` or ``method`` (naming the entry), or a
         recording that is not valid for the model (naming the column); all before any work.
@@ -212,8 +97,6 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
         if rec.model != vehicle.name:
             return Diagnosis(vehicle.name, None, _other_model(rec, vehicle))
     if method == "free" or (method == "auto" and _model_test(recordings)):
-        from .model_test import diagnose_series
-
         return diagnose_series(recordings, vehicle, calibrate, log=log)
     if len(recordings) > 1:
         raise ValueError("a series of recordings is judged in free simulation only: "
@@ -516,31 +399,3 @@ def findings_model(res: Residuals, fitted: Sequence[Fitted]
     shift = sum((res.innovations.smoothed_shift(f.w, f.v) for f in fitted),  # type: ignore
                 np.zeros_like(res.x))
     return [f.effect for f in fitted], forcing, shift
-
-
-def _finding_dict(f: Finding) -> dict[str, Any]:
-    out = {k: getattr(f, k) for k in ("effect", "target", "parameters", "std", "confidence",
-                                      "explanation", "improvement")}
-    if f.standard_form:
-        out["standard_form"] = f.standard_form
-    return out
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
-
-
-def _with_unit(value: float, unit: str) -> str:
-    """``value unit``, angles also in degrees."""
-    text = f"{value:.4g} {unit}"
-    if unit.startswith("rad"):
-        text += f" ({math.degrees(value):.3g} deg{unit[3:]})"
-    return text
-
-
-def _fmt(value: Any) -> str:
-    return f"{value:.4g}" if isinstance(value, float) else str(value)

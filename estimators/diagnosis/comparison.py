@@ -12,9 +12,12 @@ restoring as linear + cubic). Models are compared on held-out data in free simul
 * a series: each recording in turn, predicted by the model fitted on the others (only its own
   initial state fitted to it).
 
-The best candidate is accepted when it removes at least ``min_gain`` of the held-out error in
-excess of the sensor noise; the search repeats on top of it. Candidates act only where the data
-can see them: the force equations of states an input or a measured state moves.
+The best candidate whose coefficient is at least two standard deviations from zero is accepted
+when it removes at least ``min_gain`` of the held-out error in excess of the sensor noise; the
+search repeats on top of it. Actuator effects (rate limit, delay, saturation) are grids over
+their physical ranges, each screened by its best member, refined between its neighbours.
+Candidates act only where the data can see them: the force equations of states an input or a
+measured state moves.
 """
 
 from __future__ import annotations

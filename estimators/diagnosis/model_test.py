@@ -23,11 +23,11 @@ from marine_envs.models import VehicleModel
 from marine_envs.models.effects import Effect
 from marine_envs.recording import Recording
 
-from .api import Diagnosis, Finding
 from .comparison import Comparison, ComparisonConfig, HeldOut, Scored, compare
 from .explain import describe
 from .modes import check_modes, free_decays, mode_start
 from .output_error import Fit, Series, term_label
+from .result import Diagnosis, Finding
 
 #: A parameter whose standard deviation exceeds this share of its value is not identified.
 MAX_RELATIVE_STD = 0.5
@@ -214,13 +214,16 @@ def standard_form(fit: Fit, target: str) -> dict[str, float]:
     return {k: round(v, 6) for k, v in form.items()}
 
 
+def _equal(comparison: Comparison, a: Scored, b: Scored) -> bool:
+    """Held-out errors within the configured tie of each other."""
+    best = min(a.held_out.mean_square, b.held_out.mean_square)
+    return abs(a.held_out.mean_square - b.held_out.mean_square) < comparison.config.tie * best
+
+
 def _tied(comparison: Comparison, scored: Scored) -> bool:
-    for round_ in comparison.rounds:
-        if round_ and round_[0] is scored and len(round_) > 1:
-            best, second = round_[0].held_out, round_[1].held_out
-            return second.mean_square - best.mean_square \
-                < comparison.config.tie * best.mean_square
-    return False
+    """Another candidate of its round explains the held-out data as well."""
+    return any(_equal(comparison, scored, other) for round_ in comparison.rounds
+               if any(s is scored for s in round_) for other in round_ if other is not scored)
 
 
 def _alternatives(comparison: Comparison) -> list[dict[str, Any]]:
@@ -228,15 +231,12 @@ def _alternatives(comparison: Comparison) -> list[dict[str, Any]]:
     would."""
     out = []
     for round_ in comparison.rounds:
-        if not round_ or round_[0] not in comparison.accepted:
+        chosen = next((s for s in round_ if any(s is a for a in comparison.accepted)), None)
+        if chosen is None:
             continue
-        best = round_[0]
-        for other in round_[1:]:
-            if other.held_out.mean_square - best.held_out.mean_square \
-                    < comparison.config.tie * best.held_out.mean_square:
-                out.append({"chosen": best.candidate.label, "equally": other.candidate.label,
-                            "separate_by": _separating_test(best.candidate.term,
-                                                            other.candidate.term)})
+        out += [{"chosen": chosen.candidate.label, "equally": other.candidate.label,
+                 "separate_by": _separating_test(chosen.candidate.term, other.candidate.term)}
+                for other in round_ if other is not chosen and _equal(comparison, chosen, other)]
     return out
 
 

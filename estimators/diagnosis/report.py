@@ -17,7 +17,6 @@ Units are the model's SI units (angles in rad); frequencies are in rad/s like ``
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -28,7 +27,9 @@ from scipy import signal
 
 from marine_envs.models.effects import Effect, applied_inputs, state_term
 
+from . import model_test_figures, model_test_report
 from .api import Diagnosis, Finding, findings_model
+from .report_format import cell, num, pyplot, save, slug
 from .residuals import Residuals
 
 FloatArray = NDArray[np.float64]
@@ -64,9 +65,7 @@ def write_report(diagnosis: Diagnosis, directory: str | Path, recording_name: st
     diagnosis.to_json(directory / "diagnosis.json")
     figures: list[tuple[str, str]] = []
     if diagnosis.comparison is not None:  # a model test, judged in free simulation
-        from .model_test_report import write_figures as write_model_test_figures
-
-        figures = write_model_test_figures(diagnosis, directory, recording_name)
+        figures = model_test_figures.write_figures(diagnosis, directory, recording_name)
     elif diagnosis.mismatch is not None and diagnosis.residuals is not None:
         figures = write_figures(diagnosis, directory)
     path = directory / "report.md"
@@ -81,7 +80,7 @@ def write_figures(diagnosis: Diagnosis, directory: Path) -> list[tuple[str, str]
     selection = diagnosis.selection
     for k, scored in enumerate(selection.findings if selection else [], 1):
         effect = scored.fitted.effect
-        name = _slug(f"finding_{k}_{effect.effect}_{effect.target}") + ".png"
+        name = slug(f"finding_{k}_{effect.effect}_{effect.target}") + ".png"
         figures.append(plot_finding(diagnosis, k - 1, directory / name))
     return [f for f in figures if f is not None]
 
@@ -91,11 +90,9 @@ def markdown(diagnosis: Diagnosis, figures: Sequence[tuple[str, str]] = (),
              recording_name: str = "") -> str:
     """The report's text; ``figures`` are ``(relative file name, caption)`` pairs."""
     if diagnosis.comparison is not None:  # a model test, judged in free simulation
-        from .model_test_report import markdown as model_test_markdown
-
-        return model_test_markdown(diagnosis, figures, recording_name)
+        return model_test_report.markdown(diagnosis, figures, recording_name)
     title = recording_name or diagnosis.model
-    parts = [f"# Mismatch diagnosis: {_cell(title)}", "",
+    parts = [f"# Mismatch diagnosis: {cell(title)}", "",
              f"Model: `{diagnosis.model}`" + (f" · recording: `{recording_name}`"
                                               if recording_name else ""), "",
              "## Verdict", "", verdict(diagnosis), ""]
@@ -129,7 +126,7 @@ def verdict(diagnosis: Diagnosis) -> str:
 def _calibration(diagnosis: Diagnosis) -> list[str]:
     if not diagnosis.calibration:
         return []
-    rows = [f"| {n} | {_num(v)} |" for n, v in diagnosis.calibration.items()]
+    rows = [f"| {n} | {num(v)} |" for n, v in diagnosis.calibration.items()]
     return ["## Calibrated parameters", "", "| parameter | value |", "| --- | ---: |", *rows, ""]
 
 
@@ -161,8 +158,8 @@ def _findings(findings: Sequence[Finding]) -> list[str]:
     out += ["| # | effect | target | parameters (± std) | confidence | improvement | "
             "explanation |", "| ---: | --- | --- | --- | ---: | ---: | --- |"]
     for k, f in enumerate(findings, 1):
-        out.append(f"| {k} | {f.effect} | {f.target} | {_cell(_parameters(f))} | "
-                   f"{f.confidence:.2f} | {f.improvement:.0%} | {_cell(f.explanation)} |")
+        out.append(f"| {k} | {f.effect} | {f.target} | {cell(_parameters(f))} | "
+                   f"{f.confidence:.2f} | {f.improvement:.0%} | {cell(f.explanation)} |")
     return out + [""]
 
 
@@ -170,7 +167,7 @@ def _withdrawn(unconfirmed: Sequence[Finding]) -> list[str]:
     """Terms the search accepted but the held-out predictions did not confirm."""
     if not unconfirmed:
         return []
-    names = ", ".join(f"`{f.effect}` on `{f.target}` ({_cell(_parameters(f))})"
+    names = ", ".join(f"`{f.effect}` on `{f.target}` ({cell(_parameters(f))})"
                       for f in unconfirmed)
     return ["Withdrawn: " + names + ". Significant on the innovations but, refitted on the "
             "first part, it did not improve the held-out predictions.", ""]
@@ -183,7 +180,7 @@ def _fit(diagnosis: Diagnosis) -> list[str]:
     if not before:
         return []
     units = _units(diagnosis)
-    rows = [f"| {c} | {units.get(c, '')} | {_num(b)} | {_num(after.get(c, b))} | "
+    rows = [f"| {c} | {units.get(c, '')} | {num(b)} | {num(after.get(c, b))} | "
             f"{_change(b, after.get(c, b))} |" for c, b in before.items()]
     return ["## Held-out fit", "", f"{diagnosis.fit.get('validation', '')}.", "",
             "| channel | unit | RMSE before | RMSE after | change |",
@@ -196,7 +193,7 @@ def _parameters(finding: Finding) -> str:
     items = []
     for name, value in finding.parameters.items():
         std = finding.std.get(name)
-        items.append(f"{name} = {_num(value)}" + (f" ± {_num(std)}" if std is not None else ""))
+        items.append(f"{name} = {num(value)}" + (f" ± {num(std)}" if std is not None else ""))
     return ", ".join(items)
 
 
@@ -208,7 +205,7 @@ def plot_prediction_errors(diagnosis: Diagnosis, path: Path) -> tuple[str, str] 
     ro, res = diagnosis.rollouts, diagnosis.residuals
     if ro is None or res is None:
         return None
-    plt = _pyplot()
+    plt = pyplot()
     times = res.time[ro.starts]
     before = ro.nominal_error[:, -1, :]
     after = _after_error(diagnosis)
@@ -232,7 +229,7 @@ def plot_prediction_errors(diagnosis: Diagnosis, path: Path) -> tuple[str, str] 
     axes[0, 0].legend(fontsize=8, ncol=4, loc="upper left")
     axes[-1, 0].set_xlabel("start time of the prediction (s)")
     fig.suptitle(f"{ro.steps * res.dt:.1f} s-ahead prediction error (measured - predicted)")
-    _save(fig, path)
+    save(fig, path)
     return path.name, (f"{ro.steps * res.dt:.1f} s-ahead prediction error per channel against "
                        "its start time; right of the black line: held out, before (blue) and "
                        "after (orange) the findings; dotted: ±1 sensor-noise std; shaded: "
@@ -267,7 +264,7 @@ def plot_spectra(diagnosis: Diagnosis, path: Path) -> tuple[str, str] | None:
     states = measured_states(res)
     if not states:
         return None
-    plt = _pyplot()
+    plt = pyplot()
     after = res.error - total_contribution(diagnosis)
     fig, axes = plt.subplots(len(states), 1, sharex=True, squeeze=False,
                              figsize=(8, 1.9 * len(states) + 0.8))
@@ -286,7 +283,7 @@ def plot_spectra(diagnosis: Diagnosis, path: Path) -> tuple[str, str] | None:
     axes[0, 0].legend(fontsize=8, loc="lower left")
     axes[-1, 0].set_xlabel("frequency (rad/s)")
     fig.suptitle("Spectra of the equation errors of the measured states")
-    _save(fig, path)
+    save(fig, path)
     return path.name, ("Welch spectra of the measured states' equation errors before (blue) "
                        "and after (orange) subtracting the findings' contributions; shaded: "
                        "the located band")
@@ -327,10 +324,10 @@ def plot_finding(diagnosis: Diagnosis, k: int, path: Path) -> tuple[str, str] | 
         plot = _plot_parameter_change
     elif effect.effect == "wave_frequency":
         plot = _plot_wave_forcing
-    plt = _pyplot()
+    plt = pyplot()
     fig, caption = plot(plt, diagnosis, k)
     fig.suptitle(f"finding {k + 1}: {effect.effect} on {effect.target}")
-    _save(fig, path)
+    save(fig, path)
     return path.name, f"Finding {k + 1} ({effect.effect} on {effect.target}): {caption}"
 
 
@@ -498,24 +495,6 @@ def _busiest_window(weight: FloatArray, dt: float) -> slice:
 
 
 # -- helpers --------------------------------------------------------------------------------------
-def _pyplot() -> Any:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _save(fig: Any, path: Path) -> None:
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    fig.clf()
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-
-
 def _thin(n: int) -> slice:
     return slice(None, None, max(1, n // MAX_POINTS))
 
@@ -528,10 +507,6 @@ def _units(diagnosis: Diagnosis) -> dict[str, str]:
     return dict(zip(model.output_names, model.output_units, strict=True))
 
 
-def _num(value: Any) -> str:
-    return f"{value:.4g}" if isinstance(value, float | np.floating) else str(value)
-
-
 def _rate_unit(unit: str) -> str:
     """The unit of a state's equation error: its unit per second, e.g. ``(rad/s)/s``."""
     return f"({unit})/s" if "/" in unit or " " in unit else f"{unit}/s"
@@ -539,12 +514,3 @@ def _rate_unit(unit: str) -> str:
 
 def _change(before: float, after: float) -> str:
     return f"{(after - before) / before:+.0%}" if before > 0 else "–"
-
-
-def _cell(text: str) -> str:
-    """Text safe inside a Markdown table cell (pipes escaped, no line breaks)."""
-    return str(text).replace("|", "\\|").replace("\n", " ")
-
-
-def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)

@@ -1,0 +1,163 @@
+"""What a diagnosis answers: :class:`Diagnosis` (the documented JSON, a terminal summary) and its
+:class:`Finding` entries, shared by both ways of judging a record (:mod:`.api`)."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from marine_envs.models.effects import Effect
+
+from .residuals import Residuals
+from .rollout import Rollouts
+from .selection import Selection
+
+
+@dataclass
+class Finding:
+    """One effect the recording supports (the JSON's ``findings`` entries).
+
+    :param effect: catalogue name.  :param target: state, input or channel it acts on.
+    :param parameters: fitted values (SI units, the catalogue's sign convention).
+    :param std: their standard deviations.  :param confidence: in [0, 1].
+    :param improvement: held-out share of the excess prediction error this term removes alone.
+    :param explanation: what it means, in words.
+    """
+
+    effect: str
+    target: str
+    parameters: dict[str, Any]
+    std: dict[str, float]
+    confidence: float
+    improvement: float
+    explanation: str
+    standard_form: dict[str, float] = field(default_factory=dict)
+
+    def as_effect(self) -> Effect:
+        return Effect(self.effect, self.target, self.parameters)
+
+
+@dataclass
+class Diagnosis:
+    """The answer of :func:`diagnose`; :meth:`to_dict` is the documented JSON.
+
+    ``mismatch`` is True when a finding is claimed, False when nothing significant is found and
+    None when the recording cannot be judged (``reason`` says why).
+    """
+
+    model: str
+    mismatch: bool | None
+    reason: str = ""
+    channels: list[dict[str, Any]] = field(default_factory=list)
+    windows: list[dict[str, Any]] = field(default_factory=list)
+    band: dict[str, float] | None = None
+    findings: list[Finding] = field(default_factory=list)
+    unconfirmed: list[Finding] = field(default_factory=list)
+    fit: dict[str, Any] = field(default_factory=dict)
+    calibration: dict[str, float] = field(default_factory=dict)
+    model_check: dict[str, Any] = field(default_factory=dict)
+    calibration_quality: dict[str, Any] = field(default_factory=dict)
+    unexplained: dict[str, Any] = field(default_factory=dict)
+    alternatives: list[dict[str, Any]] = field(default_factory=list)
+    residuals: Residuals | None = field(default=None, repr=False)
+    rollouts: Rollouts | None = field(default=None, repr=False)
+    selection: Selection | None = field(default=None, repr=False)
+    comparison: Any = field(default=None, repr=False)  # .comparison.Comparison (model tests)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON document (see the issue's schema), with plain Python numbers; also
+        ``unconfirmed`` findings, the ``calibration`` and the ``noise_model`` (each force
+        equation's coloured forcing: correlation time, s, and std, state units per s)."""
+        out = {"model": self.model, "mismatch": self.mismatch, "channels": self.channels,
+               "windows": self.windows, "band": self.band,
+               "findings": [_finding_dict(f) for f in self.findings], "fit": self.fit}
+        if self.unconfirmed:
+            out["unconfirmed"] = [_finding_dict(f) for f in self.unconfirmed]
+        if self.reason:
+            out["reason"] = self.reason
+        if self.calibration:
+            out["calibration"] = self.calibration
+        for key in ("calibration_quality", "model_check", "unexplained", "alternatives"):
+            if getattr(self, key):
+                out[key] = getattr(self, key)
+        if self.residuals is not None and self.residuals.forcing:
+            names = self.residuals.model.state_names
+            out["noise_model"] = [{"equation": names[f.state], "correlation_time": f.tau,
+                                   "std": math.sqrt(f.variance)}
+                                  for f in self.residuals.forcing]
+        return json.loads(json.dumps(out, default=_plain))
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        text = json.dumps(self.to_dict(), indent=2)
+        if path is not None:
+            Path(path).write_text(text + "\n")
+        return text
+
+    def summary(self) -> str:
+        """A few lines for a terminal."""
+        if self.mismatch is None:
+            return f"{self.model}: cannot diagnose: {self.reason}"
+        withdrawn = [f"  withdrawn, not confirmed on held-out data: {f.effect} on {f.target} "
+                     f"(improvement {f.improvement:.0%})" for f in self.unconfirmed]
+        lines = [f"  calibrated {n} = {_fmt(q['value'])}"
+                 + (f" ± {_fmt(q['std'])}" if "std" in q else "") + f": {q['status']}"
+                 for n, q in self.calibration_quality.get("parameters", {}).items()]
+        lines += [f"  {' and '.join(c['parameters'])}: correlation {c['correlation']:+.3f}, "
+                  f"{c['status']}" for c in self.calibration_quality.get("correlations", [])]
+        lines += [f"  refitted with the findings, {n} = {_fmt(q['value'])}: {q['status']}"
+                  for n, q in self.calibration_quality.get("with_findings", {}).items()
+                  if q["status"] != "identified"]
+        if not self.mismatch:
+            return "\n".join([f"{self.model}: no significant mismatch: the nominal model "
+                              "explains the record", *lines, *withdrawn])
+        lines.insert(0, f"{self.model}: mismatch found" if self.findings else
+                     f"{self.model}: mismatch, unexplained by the catalogue")
+        for k, f in enumerate(self.findings, 1):
+            values = ", ".join(f"{n}={_fmt(v)}" + (f" ± {_fmt(f.std[n])}" if n in f.std else "")
+                               for n, v in f.parameters.items())
+            lines.append(f"  {k}. {f.effect} on {f.target} ({values}), confidence "
+                         f"{f.confidence:.2f}: {f.explanation}")
+        improvement = self.fit.get("improvement", 0)
+        if self.findings:
+            lines.append("  held-out improvement: " + (improvement if isinstance(
+                improvement, str) else f"{improvement:.0%}"))
+        for channel, left in self.unexplained.items():
+            lines.append(f"  unexplained in {channel}: {_with_unit(left['rmse'], left['unit'])}"
+                         f" RMS held-out ({left['share_of_signal']:.0%} of the signal)")
+        for alt in self.alternatives:
+            lines.append(f"  {alt['equally']} explains the data as well as {alt['chosen']}; "
+                         f"to separate them: {alt['separate_by']}")
+        return "\n".join(lines + withdrawn)
+
+
+def _finding_dict(f: Finding) -> dict[str, Any]:
+    out = {k: getattr(f, k) for k in ("effect", "target", "parameters", "std", "confidence",
+                                      "explanation", "improvement")}
+    if f.standard_form:
+        out["standard_form"] = f.standard_form
+    return out
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON-serialisable: {type(value).__name__}")
+
+
+def _with_unit(value: float, unit: str) -> str:
+    """``value unit``, angles also in degrees."""
+    text = f"{value:.4g} {unit}"
+    if unit.startswith("rad"):
+        text += f" ({math.degrees(value):.3g} deg{unit[3:]})"
+    return text
+
+
+def _fmt(value: Any) -> str:
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
