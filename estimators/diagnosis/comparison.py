@@ -357,11 +357,10 @@ def _screen_grids(current: Structure, current_fit: Fit,
     _, J = jacobian(current, current_fit.theta, rows)
     out = []
     for grid in grids:
-        left = []
-        for candidate in grid:
-            r = extend(current, candidate).residuals(current_fit.theta[None], rows)[0]
-            step, *_ = np.linalg.lstsq(J, r, rcond=None)
-            left.append(float(np.sum((r - J @ step) ** 2)))
+        theta = np.tile(current_fit.theta, (len(grid), 1))
+        r = current.residuals(theta, rows, [[c.term] for c in grid])
+        step, *_ = np.linalg.lstsq(J, r.T, rcond=None)
+        left = np.sum((r.T - J @ step) ** 2, axis=0)
         k = int(np.argmin(left))
         near = tuple(grid[j].term for j in (k - 1, k + 1) if 0 <= j < len(grid))
         out.append((left[k], Candidate(grid[k].term, neighbours=near)))

@@ -233,9 +233,11 @@ class Structure:
         low[:len(self.names)] = parameter_bounds(self.series.model, self.names)[0]
         return low, np.full(self.size, np.inf)
 
-    def simulate(self, theta: FloatArray, run: int, steps: int | None = None) -> FloatArray:
+    def simulate(self, theta: FloatArray, run: int, steps: int | None = None,
+                 actuators: Sequence[Sequence[Effect]] | None = None) -> FloatArray:
         """Measured channels ``(B, T, m)`` of the free simulations with unknowns ``theta``
-        ``(B, P)`` over run ``run`` (its first ``steps`` samples)."""
+        ``(B, P)`` over run ``run`` (its first ``steps`` samples); ``actuators`` gives each row
+        input effects of its own, after the structure's (one simulation for a whole grid)."""
         series, model = self.series, self.series.model
         theta = np.atleast_2d(theta)
         n_names, n_terms = len(self.names), len(self.terms)
@@ -250,6 +252,8 @@ class Structure:
         u = data.u
         for effect in self.inputs:
             u = applied_inputs(effect, model, u, series.dt)
+        u = np.broadcast_to(u, (theta.shape[0], *u.shape)) if actuators is None else \
+            np.stack([_applied(model, u, row, series.dt) for row in actuators])
         states = [(k, t, model.state_names.index(t.target)) for k, t in enumerate(self.terms)
                   if t.kind == "state"]
         channel_index = [model.output_names.index(c) for c in series.channels]
@@ -259,7 +263,7 @@ class Structure:
         with np.errstate(all="ignore"):  # a wild trial value may overflow: caught below
             for k in range(steps):
                 out[:, k] = model.output(x)[:, channel_index]
-                uk = np.broadcast_to(u[k], (theta.shape[0], u.shape[1]))
+                uk = u[:, k]
                 forced = affine.forced(uk)
 
                 def f(z: FloatArray, t: float, uk: FloatArray = uk,
@@ -275,22 +279,30 @@ class Structure:
                 out[:, :, series.channels.index(term.target)] += coefficients[:, j, None]
         return out
 
-    def residuals(self, theta: FloatArray, rows: Sequence[BoolArray | None]) -> FloatArray:
+    def residuals(self, theta: FloatArray, rows: Sequence[BoolArray | None],
+                  actuators: Sequence[Sequence[Effect]] | None = None) -> FloatArray:
         """Residuals ``(B, L)`` in signal scales, each run's selected samples weighted so its
         mean square counts once (runs alike; the sample rate does not matter); runs whose
-        ``rows`` entry is None are skipped."""
+        ``rows`` entry is None are skipped; ``actuators`` as in :meth:`simulate`."""
         series = self.series
         used = [r for r, mask in enumerate(rows) if mask is not None]
         parts = []
         for r in used:
             mask = rows[r]
             last = int(np.flatnonzero(mask)[-1]) + 1
-            simulated = self.simulate(theta, r, last)[:, mask[:last]]
+            simulated = self.simulate(theta, r, last, actuators)[:, mask[:last]]
             error = (simulated - series.runs[r].y[mask]) / series.scale
             weight = 1 / math.sqrt(max(int(mask.sum()), 1) * len(series.channels) * len(used))
             parts.append(error.reshape(error.shape[0], -1) * weight)
         out = np.concatenate(parts, axis=1)
         return np.clip(np.nan_to_num(out, nan=DIVERGED), -DIVERGED, DIVERGED)
+
+
+def _applied(model: VehicleModel, u: FloatArray, effects: Sequence[Effect],
+             dt: float) -> FloatArray:
+    for effect in effects:
+        u = applied_inputs(effect, model, u, dt)
+    return u
 
 
 def term_label(term: Effect) -> str:
