@@ -109,7 +109,7 @@ class Diagnosis:
                  for n, q in self.calibration_quality.get("parameters", {}).items()]
         lines += [f"  {' and '.join(c['parameters'])}: correlation {c['correlation']:+.3f}, "
                   f"{c['status']}" for c in self.calibration_quality.get("correlations", [])]
-        lines += [f"  refitted with the findings, {n} = {_fmt(q['value'])}: {q['status']}"
+        lines += [f"  refitted with the findings, {n} is {q['status']}"
                   for n, q in self.calibration_quality.get("with_findings", {}).items()
                   if q["status"] != "identified"]
         if not self.mismatch:
