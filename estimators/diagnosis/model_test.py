@@ -48,15 +48,12 @@ def diagnose_series(recordings: Sequence[Recording], vehicle: VehicleModel,
     problem = _too_little(series, calibrate)
     if problem:
         return Diagnosis(vehicle.name, None, problem)
-    decays = {c: d for run in series.runs
-              for c, d in free_decays(run.time, run.u, run.y, run.noise,
-                                      series.channels).items()}
-    check = check_modes(vehicle, series.channels, next(iter(decays.values())), calibrate) \
-        if decays else None
-    start = None
-    if decays and calibrate:
-        start = mode_start(vehicle, series.channels, next(iter(decays.values())), calibrate)
-    if check and not check["matches"] and not (start and calibrate):
+    # the first free decay of the series: its mode checks the model and starts the calibration
+    decay = next((d for run in series.runs for d in free_decays(
+        run.time, run.u, run.y, run.noise, series.channels).values()), None)
+    check = check_modes(vehicle, series.channels, decay, calibrate) if decay else None
+    start = mode_start(vehicle, series.channels, decay, calibrate) if decay else None
+    if check and not check["matches"] and not start:
         return Diagnosis(vehicle.name, None, str(check["advice"]), model_check=check)
     say(f"free simulation of {len(series.runs)} recording(s) at {series.dt:.3g} s steps: "
         f"calibrating {', '.join(calibrate) or 'the initial states'} and comparing nested "
