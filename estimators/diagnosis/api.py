@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import signal
+from scipy import optimize, signal
 
 from marine_envs.models import VehicleModel, get_model
 from marine_envs.models.effects import Effect
@@ -32,6 +32,7 @@ from marine_envs.recording import Recording, read_recording
 
 from .explain import explain
 from .model_test import diagnose_series
+from .output_error import parameter_bounds
 from .residuals import Residuals, estimate, white_noise_std
 from .result import Diagnosis, Finding
 from .rollout import Rollouts
@@ -243,10 +244,6 @@ def _equation_fit(residuals: Residuals, values: dict[str, float]
                   ) -> tuple[dict[str, float], list[str], bool]:
     """One pass of :func:`_calibrate`: scipy's bounded trust region on the measured states'
     equation errors; the values, the names the equations contain, and convergence."""
-    from scipy import optimize
-
-    from .output_error import parameter_bounds
-
     vehicle = residuals.model
     x, u = residuals.midpoint, residuals.u[:-1]
     measured = [i for i, s in enumerate(vehicle.state_names) if s in residuals.channels]

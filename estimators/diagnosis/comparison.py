@@ -83,12 +83,15 @@ class HeldOut:
     :param mean_square: in signal scales, mean over channels (and runs).
     :param rmse: per channel, in the channel's units.  :param per_run: mean square per run.
     :param diverged: its simulation left every sane range.
+    :param theta: of a single record, the unknowns fitted on its first part (what predicted
+        the rest); None for a series.
     """
 
     mean_square: float
     rmse: dict[str, float]
     per_run: list[float]
     diverged: bool = False
+    theta: FloatArray | None = field(default=None, repr=False)
 
 
 @dataclass
@@ -212,12 +215,18 @@ def all_rows(series: Series) -> list[BoolArray | None]:
     return [np.ones(len(r.time), dtype=bool) for r in series.runs]
 
 
+def fit_part(time: FloatArray, config: ComparisonConfig) -> BoolArray:
+    """The samples of a single record its held-out score fits on (the rest is predicted)."""
+    return time < time[0] + config.fit_fraction * (time[-1] - time[0])
+
+
 def held_out(structure: Structure, theta: FloatArray, config: ComparisonConfig) -> HeldOut:
     """The structure's held-out error, its fits warm-started from ``theta`` (module doc)."""
     series = structure.series
+    fitted = None
     if len(series.runs) == 1:
         run = series.runs[0]
-        split = run.time < run.time[0] + config.fit_fraction * run.duration
+        split = fit_part(run.time, config)
         fitted = fit(structure, [split], theta).theta
         errors = [(structure.simulate(fitted, 0)[0][~split] - run.y[~split]) / series.scale]
     else:
@@ -241,7 +250,7 @@ def held_out(structure: Structure, theta: FloatArray, config: ComparisonConfig) 
     rmse = {c: float(np.sqrt(np.mean(stacked[:, j] ** 2)) * series.scale[j])
             for j, c in enumerate(series.channels)}
     return HeldOut(float(np.mean(per_run)) if not diverged else math.inf, rmse,
-                   per_run, diverged)
+                   per_run, diverged, fitted)
 
 
 # -- the search -----------------------------------------------------------------------------------

@@ -21,7 +21,6 @@ from numpy.typing import NDArray
 
 from .comparison import Comparison
 from .modes import Decay, decay_analysis, free_decays
-from .output_error import fit
 from .report_format import num, pyplot, save
 from .result import Diagnosis
 
@@ -58,23 +57,15 @@ def _simulations(comparison: Comparison, held_out: bool) -> list[dict[str, Float
     when terms were accepted, ``"corrected"`` (the final model). ``held_out``: each model
     refitted on the first ``fit_fraction`` of a single record, as its held-out score is
     computed (the rest is predicted); otherwise the fits to all data."""
-    fits = {"nominal": comparison.nominal}
+    fits = {"nominal": (comparison.nominal, comparison.nominal_held_out)}
     if comparison.accepted:
-        fits["corrected"] = comparison.final
+        fits["corrected"] = (comparison.final, comparison.final_held_out)
     out: list[dict[str, FloatArray]] = [{} for _ in comparison.series.runs]
-    for key, model_fit in fits.items():
-        theta = model_fit.theta
-        if held_out:
-            run = comparison.series.runs[0]
-            theta = fit(model_fit.structure, [_fit_part(comparison, run.time)], theta).theta
+    for key, (model_fit, score) in fits.items():
+        theta = score.theta if held_out and score.theta is not None else model_fit.theta
         for r in range(len(comparison.series.runs)):
             out[r][key] = model_fit.structure.simulate(theta, r)[0]
     return out
-
-
-def _fit_part(comparison: Comparison, time: FloatArray) -> NDArray[np.bool_]:
-    """The samples of a single record the held-out score fits on (the rest is predicted)."""
-    return time < time[0] + comparison.config.fit_fraction * (time[-1] - time[0])
 
 
 def run_labels(comparison: Comparison, recording_name: str = "") -> list[str]:

@@ -20,7 +20,7 @@ from .model_test import standard_form
 from .model_test_figures import channel_units, display_unit, with_degrees
 from .modes import MODE_TOLERANCE, free_decays, model_modes
 from .output_error import Fit
-from .report_format import cell, num
+from .report_format import cell, change, num, parameters
 from .result import Diagnosis, Finding
 
 FloatArray = NDArray[np.float64]
@@ -213,7 +213,7 @@ def _findings(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
     for k, f in enumerate(diagnosis.findings, 1):
         form = ", ".join(f"{key} = {num(f.standard_form[key])}" for key, _ in STANDARD_TERMS
                          if key in f.standard_form)
-        out.append(f"| {k} | {f.effect} | {f.target} | {cell(_parameters(f))} | {form} | "
+        out.append(f"| {k} | {f.effect} | {f.target} | {cell(parameters(f))} | {form} | "
                    f"{f.confidence:.2f} | {_percent(f.improvement)} | "
                    f"{cell(f.explanation)} |")
     out += ["", "Final model, all terms refitted together on all data (per unit inertia):", ""]
@@ -237,14 +237,6 @@ def _sign_notes(final: Fit, target: str) -> list[str]:
            "recorded, do not extrapolate it." for key, word in words.items()
            if form.get(key, 0.0) < 0]
     return [line for note in out for line in (note, "")]
-
-
-def _parameters(finding: Finding) -> str:
-    items = []
-    for name, value in finding.parameters.items():
-        std = finding.std.get(name)
-        items.append(f"{name} = {num(value)}" + (f" ± {num(std)}" if std is not None else ""))
-    return ", ".join(items)
 
 
 def _equation(final: Fit, target: str, findings: Sequence[Finding]) -> str:
@@ -307,7 +299,7 @@ def _held_out(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
         a = after.get(c, b)
         rows.append(f"| {c} | {unit}" + (f" ({shown})" if shown != unit else "") + " | "
                     f"{with_degrees(noise[c], unit) if c in noise else '–'} | "
-                    f"{with_degrees(b, unit)} | {with_degrees(a, unit)} | {_change(b, a)} |")
+                    f"{with_degrees(b, unit)} | {with_degrees(a, unit)} | {change(b, a)} |")
     improvement = fit_.get("improvement")
     combined = ("the model with the findings **diverged** in the held-out free simulation"
                 if improvement == "diverged" else
@@ -393,8 +385,3 @@ restoring. The corrected model should follow the measured points down to small a
 def _percent(value: Any) -> str:
     return f"{value:.0%}" if isinstance(value, int | float) and not isinstance(value, bool) \
         else str(value)
-
-
-def _change(before: float, after: float) -> str:
-    return f"{(after - before) / before:+.0%}" if before > 0 else "–"
-

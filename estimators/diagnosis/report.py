@@ -29,7 +29,7 @@ from marine_envs.models.effects import Effect, applied_inputs, state_term
 
 from . import model_test_figures, model_test_report
 from .api import Diagnosis, Finding, findings_model
-from .report_format import cell, num, pyplot, save, slug
+from .report_format import cell, change, num, parameters, pyplot, save, slug
 from .residuals import Residuals
 
 FloatArray = NDArray[np.float64]
@@ -158,7 +158,7 @@ def _findings(findings: Sequence[Finding]) -> list[str]:
     out += ["| # | effect | target | parameters (± std) | confidence | improvement | "
             "explanation |", "| ---: | --- | --- | --- | ---: | ---: | --- |"]
     for k, f in enumerate(findings, 1):
-        out.append(f"| {k} | {f.effect} | {f.target} | {cell(_parameters(f))} | "
+        out.append(f"| {k} | {f.effect} | {f.target} | {cell(parameters(f))} | "
                    f"{f.confidence:.2f} | {f.improvement:.0%} | {cell(f.explanation)} |")
     return out + [""]
 
@@ -167,7 +167,7 @@ def _withdrawn(unconfirmed: Sequence[Finding]) -> list[str]:
     """Terms the search accepted but the held-out predictions did not confirm."""
     if not unconfirmed:
         return []
-    names = ", ".join(f"`{f.effect}` on `{f.target}` ({cell(_parameters(f))})"
+    names = ", ".join(f"`{f.effect}` on `{f.target}` ({cell(parameters(f))})"
                       for f in unconfirmed)
     return ["Withdrawn: " + names + ". Significant on the innovations but, refitted on the "
             "first part, it did not improve the held-out predictions.", ""]
@@ -181,20 +181,12 @@ def _fit(diagnosis: Diagnosis) -> list[str]:
         return []
     units = _units(diagnosis)
     rows = [f"| {c} | {units.get(c, '')} | {num(b)} | {num(after.get(c, b))} | "
-            f"{_change(b, after.get(c, b))} |" for c, b in before.items()]
+            f"{change(b, after.get(c, b))} |" for c, b in before.items()]
     return ["## Held-out fit", "", f"{diagnosis.fit.get('validation', '')}.", "",
             "| channel | unit | RMSE before | RMSE after | change |",
             "| --- | --- | ---: | ---: | ---: |", *rows, "",
             f"Combined improvement (share of the excess error removed): "
             f"{diagnosis.fit.get('improvement', 0):.0%}.", ""]
-
-
-def _parameters(finding: Finding) -> str:
-    items = []
-    for name, value in finding.parameters.items():
-        std = finding.std.get(name)
-        items.append(f"{name} = {num(value)}" + (f" ± {num(std)}" if std is not None else ""))
-    return ", ".join(items)
 
 
 # -- figure (a): held-out prediction errors -------------------------------------------------------
@@ -510,7 +502,3 @@ def _units(diagnosis: Diagnosis) -> dict[str, str]:
 def _rate_unit(unit: str) -> str:
     """The unit of a state's equation error: its unit per second, e.g. ``(rad/s)/s``."""
     return f"({unit})/s" if "/" in unit or " " in unit else f"{unit}/s"
-
-
-def _change(before: float, after: float) -> str:
-    return f"{(after - before) / before:+.0%}" if before > 0 else "–"

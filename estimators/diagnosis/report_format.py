@@ -38,3 +38,17 @@ def cell(text: str) -> str:
 
 def slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", text)
+
+
+def parameters(finding: Any) -> str:
+    """A finding's parameters, each with its standard deviation where it has one."""
+    items = []
+    for name, value in finding.parameters.items():
+        std = finding.std.get(name)
+        items.append(f"{name} = {num(value)}" + (f" ± {num(std)}" if std is not None else ""))
+    return ", ".join(items)
+
+
+def change(before: float, after: float) -> str:
+    """The relative change from ``before`` to ``after``, e.g. ``-54%``."""
+    return f"{(after - before) / before:+.0%}" if before > 0 else "–"
