@@ -354,6 +354,7 @@ def _validate(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
         "validation": (f"held-out last {1 - ro.fit_fraction:.0%}, findings refitted on the "
                        f"rest: {ro.steps}-step ({ro.steps * ro.res.dt:.1f} s) predictions from "
                        "the smoothed state, error in excess of the sensor noise"),
+        "expected_from_sea": round(ro.sea_share(before), 4),
         "terms": [{"effect": s.fitted.effect.effect, "target": s.fitted.effect.target,
                    "improvement": s.alone} for s in selection.findings],
     }

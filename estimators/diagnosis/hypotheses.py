@@ -95,7 +95,19 @@ def _states(res: Residuals) -> FloatArray:
 
 
 def _targets(res: Residuals) -> list[int]:
-    return [i for i in range(len(res.model.state_names)) if res.observable[i]]
+    """Observable states of the vehicle (not of its disturbance model)."""
+    noise = res.model.noise_model_states
+    return [i for i, name in enumerate(res.model.state_names)
+            if res.observable[i] and name not in noise]
+
+
+def _moving(res: Residuals) -> list[int]:
+    """Targets whose smoothed state moves well beyond its own uncertainty: only a moving state
+    can carry a damping, drive a coupling or enter a product (a morphing fraction held
+    constant, known to 1e-18, would fit any coefficient, 1e32 included)."""
+    spread = np.std(res.x, axis=0)
+    uncertainty = np.median(res.x_std, axis=0)
+    return [i for i in _targets(res) if spread[i] > 3 * uncertainty[i]]
 
 
 def _dynamic_targets(res: Residuals) -> list[int]:
@@ -117,6 +129,7 @@ def state_families(res: Residuals) -> Iterator[Family]:
     x, names = _states(res), res.model.state_names
     n = len(names)
     kinematic = displacements(res.model)
+    moving = _moving(res)
     for i in _targets(res):
         xi = x[:, i]
         singles = [("current", np.ones_like(xi), {}, "b"),
@@ -124,12 +137,12 @@ def state_families(res: Residuals) -> Iterator[Family]:
                    ("quadratic_damping", xi * np.abs(xi), {}, "c"),
                    ("nonlinear_damping", xi**3, {"form": "cubic"}, "c")]
         for effect, column, fixed, name in singles:
-            if effect == "current" or (np.ptp(column) > 0 and i not in kinematic):
+            if effect == "current" or (i in moving and i not in kinematic):
                 yield Family(effect, names[i], [fixed], _in_equation(i, column[:, None], n),
                              coefficient=name)
         if i in kinematic:
             continue  # kinematics: geometry, exact but for a drift (the current above)
-        sources = [s for s in _targets(res) if s != i and np.ptp(x[:, s]) > 0]
+        sources = [s for s in moving if s != i]
         restoring = [s for s in sources if s in kinematic]
         for effect, power, chosen in (("coupling", 1, sources),
                                       ("nonlinear_restoring", 3, restoring)):
@@ -328,7 +341,7 @@ def unlisted_families(res: Residuals) -> Iterator[Family]:
     ``x_a**2``, ``u_j**2``), each as a member, in each equation: the sparse regression's one
     term, chosen on the training data."""
     model, x = res.model, _states(res)
-    variables = [(model.state_names[i], x[:, i]) for i in _targets(res)]
+    variables = [(model.state_names[i], x[:, i]) for i in _moving(res)]
     variables += [(n, res.u[:, j]) for j, n in enumerate(model.input_names)
                   if np.ptp(res.u[:, j]) > 0]
     library = [(f"{a}*{b}", va * vb)

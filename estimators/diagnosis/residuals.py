@@ -169,8 +169,9 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
     n = len(model.state_names)
     substeps = substeps_for(model, dt)
     measured = np.array([name in channels for name in model.state_names])
+    own, own_q = _model_process_noise(model, dt)
     q = _initial_process_noise(model, y, u, channels, dt)
-    q = np.where(measured, q, q * FOLLOW_MODEL)
+    q = np.where(own, own_q, np.where(measured, q, q * FOLLOW_MODEL))
     x0, P0 = _initial_state(model, y, channels, noise)
     forcing: list[Forcing] = []
     for k in range(passes):
@@ -181,7 +182,7 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
         if k == passes - 1:
             break
         variance = np.maximum(np.var(error, axis=0), 1e-12 * (np.var(x, axis=0) + 1e-12))
-        q = np.where(measured, variance * dt**2, q * FOLLOW_MODEL)
+        q = np.where(own, own_q, np.where(measured, variance * dt**2, q * FOLLOW_MODEL))
         if k == passes - 2:
             forcing = forcing_model(model, x, u, error, measured, dt)
             for f in forcing:
@@ -280,6 +281,32 @@ def _initial_state(model: VehicleModel, y: FloatArray, channels: tuple[str, ...]
         if name not in channels:
             spread[i] = scale[i]
     return x0, np.diag(spread**2)
+
+
+def _model_process_noise(model: VehicleModel, dt: float
+                         ) -> tuple[NDArray[np.bool_], FloatArray]:
+    """Which states belong to the model's own disturbance model, and their per-step process
+    noise variance ``diag(E E') dt`` from its unit-intensity white disturbances."""
+    own = np.array([name in model.noise_model_states for name in model.state_names])
+    _, _, E = model.linearize()
+    return own, np.sum(E * E, axis=1) * dt
+
+
+def model_noise_spread(model: VehicleModel, channels: tuple[str, ...], dt: float,
+                       steps: int) -> FloatArray:
+    """Variance ``(steps, m)`` that the model's own white disturbances (of its
+    :attr:`~marine_envs.models.VehicleModel.noise_model_states`) add to a prediction of the
+    ``channels`` 1..``steps`` samples ahead (linearised at the nominal point): what no
+    prediction can remove, however right the model."""
+    own, q = _model_process_noise(model, dt)
+    A, _, _ = model.linearize()
+    C = _output_matrix(model, channels)
+    Phi, Q = linalg.expm(A * dt), np.diag(np.where(own, q, 0.0))
+    out, P = np.zeros((steps, len(channels))), np.zeros_like(Q)
+    for k in range(steps):
+        P = Phi @ P @ Phi.T + Q
+        out[k] = np.einsum("ij,jk,ik->i", C, P, C)
+    return out
 
 
 def _initial_process_noise(model: VehicleModel, y: FloatArray, u: FloatArray,

@@ -126,6 +126,10 @@ class Diagnosis:
         if self.findings:
             lines.append("  held-out improvement: " + (improvement if isinstance(
                 improvement, str) else f"{improvement:.0%}"))
+            sea = self.fit.get("expected_from_sea", 0)
+            if sea >= 0.5:
+                lines.append(f"  (the model's own sea model expects {sea:.0%} of the held-out "
+                             "prediction error: the improvement is measured against it)")
         for channel, left in self.unexplained.items():
             lines.append(f"  unexplained in {channel}: {_with_unit(left['rmse'], left['unit'])}"
                          f" RMS held-out ({left['share_of_signal']:.0%} of the signal)")

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from marine_envs.models.effects import Effect, EffectModel
 from marine_envs.models.integrate import rk4
 
-from .residuals import Residuals
+from .residuals import Residuals, model_noise_spread
 
 FloatArray = NDArray[np.float64]
 
@@ -50,6 +50,9 @@ class Rollouts:
         self.nominal_error = self.target - nominal
         # what no model can remove: the sensor noise in the predicted samples, per start
         self.noise_floor = self.steps * float(np.sum(self.weights * residuals.noise**2))
+        # and what the model's own disturbance model (a DP vessel's sea) expects on top
+        self.sea_floor = float(np.sum(self.weights * model_noise_spread(
+            model, residuals.channels, residuals.dt, self.steps)))
 
     def predict(self, effects: Sequence[Effect],
                 forcing: Mapping[int, FloatArray] | None = None,
@@ -97,6 +100,13 @@ class Rollouts:
         b, a = float(before[self.held].sum()), float(after[self.held].sum())
         excess = max(b - floor, 0.05 * b)
         return min((b - a) / excess, 1.0) if excess > 0 else 0.0
+
+    def sea_share(self, before: FloatArray) -> float:
+        """The share of the held-out error in excess of the sensor noise that the model's own
+        disturbance model expects (0 for a model without one)."""
+        b = float(before[self.held].mean())
+        return min(self.sea_floor / max(b - self.noise_floor, 1e-300), 1.0) \
+            if self.sea_floor else 0.0
 
     def rmse(self, effects: Sequence[Effect], forcing: Mapping[int, FloatArray] | None = None,
              shift: FloatArray | None = None, held: bool = True) -> dict[str, float]:

@@ -50,6 +50,10 @@ class VehicleModel(ABC):
     #: parameter may hold one value per batch row (:meth:`with_rows`): one ``rhs`` call for any
     #: number of parameter sets.
     row_parameters: ClassVar[bool] = False
+    #: States of the model's own disturbance model (a DP observer's bias and wave-frequency
+    #: motion), driven by unit-intensity white disturbances: the model states their statistics,
+    #: so a diagnosis takes their process noise from the model and looks for no term in them.
+    noise_model_states: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, params: Any) -> None:
         self.params = params

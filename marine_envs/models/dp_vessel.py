@@ -213,6 +213,7 @@ class DPVesselModel(VehicleModel):
     #: LF + WF motion.
     measured_names: ClassVar[tuple[str, ...]] = ("north", "east", "psi")
     is_linear: ClassVar[bool] = False  # R(psi)
+    noise_model_states: ClassVar[tuple[str, ...]] = state_names[6:]
 
     def __init__(self, params: DPVesselParams | None = None) -> None:
         super().__init__(DPVesselParams() if params is None else params)
