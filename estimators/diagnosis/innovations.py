@@ -49,13 +49,8 @@ def _ar_fit(x: FloatArray, order: int, segment: int = 512) -> FloatArray:
 
 
 def _moving_average(a: FloatArray, x: FloatArray) -> FloatArray:
-    """``sum_i a_i x_{k-i}`` along axis 0 from rest: ``lfilter(a, [1], x, axis=0)`` as a few
-    whole-array sums (lfilter runs an FIR column by column, slow for the many columns of
-    :meth:`Innovations.response`)."""
-    out = a[0] * x
-    for lag in range(1, min(len(a), len(x))):
-        out[lag:] += a[lag] * x[:-lag]
-    return out
+    """``sum_i a_i x_{k-i}`` along axis 0 from rest."""
+    return signal.lfilter(a, [1.0], x, axis=0)
 
 
 @dataclass

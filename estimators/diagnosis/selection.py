@@ -21,6 +21,7 @@ two hypotheses that explain the same thing share it.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,6 +32,7 @@ from scipy import stats
 from marine_envs.models.effects import Effect
 
 from .hypotheses import Family, all_families, bias_term, change_families
+from .innovations import Innovations
 from .residuals import Residuals
 
 FloatArray = NDArray[np.float64]
@@ -207,14 +209,15 @@ def select(residuals: Residuals, config: DiagnosisConfig = DiagnosisConfig()) ->
     findings: list[Scored] = []
     ranking: list[Scored] = []
     tried = 0
+    catalogue = list(all_families(residuals))
+    response = _cached_responses(innovations)
     for round_ in range(config.max_findings):
         accepted = [s.fitted for s in findings]
         before = evaluator.cross_validate(accepted)
-        families = [f for f in all_families(residuals)
-                    if f.key not in {s.family.key for s in findings}]
+        families = [f for f in catalogue if f.key not in {s.family.key for s in findings}]
         tried = len(families)
-        scored = [s for f in families
-                  if (s := _score(residuals, evaluator, accepted, before, f, config, tried))]
+        scored = [s for f in families if (s := _score(residuals, evaluator, accepted, before, f,
+                                                      config, tried, response(f)))]
         scored.sort(key=lambda s: s.gain, reverse=True)
         _confidences(scored)
         if round_ == 0:
@@ -230,9 +233,25 @@ def select(residuals: Residuals, config: DiagnosisConfig = DiagnosisConfig()) ->
     return Selection(findings, ranking, tried)
 
 
+def _cached_responses(innovations: Innovations,
+                      limit: float = 16e6) -> Callable[[Family], FloatArray]:
+    """A family's innovation response, kept for the later rounds when it is small (the
+    filter does not change between rounds; one response is a pass over the whole record)."""
+    cache: dict[int, FloatArray] = {}
+
+    def response(family: Family) -> FloatArray:
+        if id(family) not in cache:
+            G = innovations.response(family.w, family.v)
+            if G.nbytes > limit:
+                return G
+            cache[id(family)] = G
+        return cache[id(family)]
+
+    return response
+
+
 def _score(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], before: FloatArray,
-           family: Family, config: DiagnosisConfig, tried: int) -> Scored | None:
-    G = res.innovations.response(family.w, family.v)  # type: ignore[union-attr]
+           family: Family, config: DiagnosisConfig, tried: int, G: FloatArray) -> Scored | None:
     if not np.any(np.abs(G) > 1e-9):
         return None  # the measured channels do not see this term
     after = evaluator.cross_validate(accepted, G, family.free)
