@@ -1,5 +1,7 @@
-"""The diagnosis on its whole seeded acceptance set (issue 6): every catalogue effect on the USV
-and the hovercraft, pairs and effect-free records, at 5 % and 10 % sensor noise.
+"""The diagnosis on the tuned part of its seeded acceptance set (issue 6): every catalogue
+effect on the USV and the hovercraft, pairs and effect-free records, at 5 % and 10 % sensor
+noise, seed 0 (``TUNED_VEHICLES``), as a regression guard. The held-out seeds and the other
+three vehicles are measured by ``benchmarks/diagnosis.py``, not here: too long for CI.
 
 The rates are held at floors: what the method reaches today, a little below, so that a change
 that makes it worse fails here. The acceptance targets themselves
@@ -12,7 +14,14 @@ from concurrent.futures import ProcessPoolExecutor
 
 import pytest
 
-from estimators.diagnosis.cases import TARGETS, catalogue_cases, confusion, run_case, summarize
+from estimators.diagnosis.cases import (
+    TARGETS,
+    TUNED_VEHICLES,
+    catalogue_cases,
+    confusion,
+    run_case,
+    summarize,
+)
 
 #: Floors under the rates measured on this set (2026-11-22: ranked right 65/68, key parameter
 #: 61/66, held-out improvement 67/68, effect-free records clean 11/12).
@@ -21,7 +30,8 @@ FLOORS = {"ranked_right": 0.92, "parameter_ok": 0.88, "improvement_ok": 0.95, "c
 
 @pytest.fixture(scope="module")
 def outcomes():
-    cases = catalogue_cases(noises=(0.05, 0.10), seeds=(0,), pairs=True, effect_free=3)
+    cases = catalogue_cases(TUNED_VEHICLES, noises=(0.05, 0.10), seeds=(0,), pairs=True,
+                            effect_free=3)
     with ProcessPoolExecutor(min(2, os.cpu_count() or 1)) as pool:
         return list(pool.map(run_case, cases))
 

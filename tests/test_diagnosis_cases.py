@@ -7,7 +7,9 @@ import pytest
 
 from estimators.diagnosis import Diagnosis, Finding
 from estimators.diagnosis.cases import (
+    LEFT_OUT,
     PAIRS,
+    PARTIAL,
     TARGETS,
     Case,
     build_effect,
@@ -17,6 +19,7 @@ from estimators.diagnosis.cases import (
     sindy_term_to_effect,
     summarize,
 )
+from estimators.diagnosis.residuals import observable_states
 from marine_envs.models import get_model
 from marine_envs.models.effects import CATALOGUE, Effect
 
@@ -118,7 +121,8 @@ def test_confusion_and_summary():
 
 def test_targets_cover_the_catalogue_and_build_valid_effects():
     for model, entries in TARGETS.items():
-        assert sorted(e for e, _, _ in entries) == sorted(CATALOGUE)
+        left_out = LEFT_OUT.get(model, {})
+        assert sorted(e for e, _, _ in entries) == sorted(set(CATALOGUE) - set(left_out))
         vehicle = get_model(model)
         for entry in entries + [e for pair in PAIRS[model] for e in pair]:
             effect = build_effect(model, entry, seed=0, duration=60.0)
@@ -132,6 +136,22 @@ def test_catalogue_cases_counts_and_seeds():
     assert len(cases) == 2 * (15 + 2 + 3) and len(free) == 6
     assert len({c.seed for c in free}) == 3 and len({c.name for c in cases}) == len(cases)
     assert all(c.duration == 60.0 for c in cases)
+
+
+def test_odd_seeds_record_the_partial_channels_and_keep_every_target_observable():
+    cases = catalogue_cases(vehicles=("usv",), noises=(0.05,), seeds=(0, 1), pairs=False,
+                            effect_free=2, duration=60.0, partial=True)
+    assert {c.seed % 2 for c in cases if c.measured} == {1}
+    assert all(c.measured is None for c in cases if c.seed % 2 == 0)
+    recording = next(c for c in cases if c.measured).recording()
+    assert recording.measured_names == PARTIAL["usv"]
+    assert next(c for c in cases if c.measured).name.endswith("/partial")
+    for model, channels in PARTIAL.items():
+        vehicle = get_model(model)
+        observable = observable_states(vehicle, channels)
+        for effect, target, _ in TARGETS[model]:
+            if target in vehicle.state_names:
+                assert observable[vehicle.state_names.index(target)], (model, effect, target)
 
 
 @pytest.mark.parametrize(("term", "state", "expected"), [
