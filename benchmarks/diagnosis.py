@@ -23,24 +23,25 @@ the time one diagnosis takes on one core.
    - no finding of confidence >= 0.5 on an effect-free record: at least 95 % of them.
 
 2. Baseline: plain SINDy on the residuals (pysindy; ``pip install -e ".[bench]"``) on the same
-   records with effects. The measured channels (all states but the USV's sway speed ``v``, held
-   at its nominal value) are smoothed and differentiated with pysindy's smoothed finite
-   difference (Savitzky-Golay, 11 samples); the residual ``x_dot - model.rhs(x, u)`` of each
-   measured state is regressed by ``SINDy(optimizer=STLSQ(threshold),
-   feature_library=PolynomialLibrary(degree=3))`` on the measured states with the inputs as
-   control. So that one threshold serves every channel and vehicle, states and inputs are
-   divided by their root-mean-square (not centred, so a monomial keeps its meaning) and each
-   residual by the spread of its state's derivative. The answer is the term with the largest
-   ``|coefficient| x RMS(term)`` (RMS, not std: a constant term has none) over all equations,
-   named by :func:`~estimators.diagnosis.cases.sindy_term_to_effect`; for a pair, the two best
-   distinct answers. Threshold 0.1: a sweep over 0.01-0.5 (both vehicles, seed 0, 5 %, 10 % and
-   20 % noise, single effects; ``--sindy-thresholds``) ranked no case right at any threshold, so
-   the middle value is kept. Without any effect and without noise the residual is already 1.4-13
-   times the spread of the derivative it belongs to (USV: the unmeasured sway speed held at zero;
-   hydrofoil: the stiff heave-pitch model evaluated on smoothed 10 Hz states, and the sea), while
-   an effect is sized at 0.3 of it. On the hovercraft, every state measured, it ranks no case
-   right either (2026-11-21, 5 % and 10 % noise). Its ranked-right rate is reported next to the
-   diagnosis's on the same cases, per noise level (``--with-20`` adds 20 % noise for both).
+   records with effects. The measured channels (all states but the USV's sway speed ``v`` and
+   what a partial record leaves out, held at their nominal values) are smoothed and
+   differentiated with pysindy's smoothed finite difference (Savitzky-Golay, 11 samples); the
+   residual ``x_dot - model.rhs(x, u)`` of each measured state is regressed by
+   ``SINDy(optimizer=STLSQ(threshold), feature_library=PolynomialLibrary(degree=3))`` on the
+   measured states with the inputs as control. So that one threshold serves every channel and
+   vehicle, states and inputs are divided by their root-mean-square (not centred, so a monomial
+   keeps its meaning) and each residual by the spread of its state's derivative. The answer is
+   the term with the largest ``|coefficient| x RMS(term)`` (RMS, not std: a constant term has
+   none) over all equations, named by :func:`~estimators.diagnosis.cases.sindy_term_to_effect`;
+   for a pair, the two best distinct answers. Threshold 0.1: a sweep over 0.01-0.5 (both
+   vehicles, seed 0, 5 %, 10 % and 20 % noise, single effects; ``--sindy-thresholds``) ranked no
+   case right at any threshold, so the middle value is kept. Without any effect and without
+   noise the residual is already 1.4-13 times the spread of the derivative it belongs to (USV:
+   the unmeasured sway speed held at zero; hydrofoil: the stiff heave-pitch model evaluated on
+   smoothed 10 Hz states, and the sea), while an effect is sized at 0.3 of it. On the
+   hovercraft, every state measured, it ranks no case right either (2026-11-21, 5 % and 10 %
+   noise). Its ranked-right rate is reported next to the diagnosis's on the same cases, per
+   noise level (``--with-20`` adds 20 % noise for both).
 
 3. Timing: a 10-minute record at 10 Hz of the USV with quadratic damping on r at 10 % noise,
    diagnosed in this process pinned to one CPU with one BLAS thread (target: 30 s); as a
@@ -48,8 +49,8 @@ the time one diagnosis takes on one core.
    (``estimators.diagnosis.residuals.estimate``) on the same record, and the ratio.
 
 Exit code 1 when an acceptance rate or the time target is missed. Run time on 2 cores: about
-5 min with ``--quick --vehicles usv`` (32 cases), 14 min with ``--seeds 0`` (92 cases, 9-27 s
-each), about 25 min in full (seeds 0 and 1).
+5 min with ``--quick --vehicles usv``; 36-40 min with ``--no-pairs --effect-free 3`` (314 cases,
+median 3.5-6.5 s a case but 31-33 s for the ROV and 13 s for the hydrofoil); more in full.
 
     python benchmarks/diagnosis.py [--split held-out|tuned] [--quick] [--vehicles usv,rov]
                                    [--noise 0.05,0.10] [--seeds 2,3] [--no-pairs]
