@@ -49,7 +49,8 @@ def _ar_fit(x: FloatArray, order: int, segment: int = 512) -> FloatArray:
 
 
 def _moving_average(a: FloatArray, x: FloatArray) -> FloatArray:
-    """``sum_i a_i x_{k-i}`` along axis 0 from rest."""
+    """``sum_i a_i x_{k-i}`` along axis 0 from rest (one lfilter call: faster than a sum per
+    lag once the AR filter is long)."""
     return signal.lfilter(a, [1.0], x, axis=0)
 
 
