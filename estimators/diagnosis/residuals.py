@@ -283,12 +283,16 @@ def _initial_state(model: VehicleModel, y: FloatArray, channels: tuple[str, ...]
     return x0, np.diag(spread**2)
 
 
-def _model_process_noise(model: VehicleModel, dt: float
+def _model_process_noise(model: VehicleModel, dt: float, E: FloatArray | None = None
                          ) -> tuple[NDArray[np.bool_], FloatArray]:
     """Which states belong to the model's own disturbance model, and their per-step process
-    noise variance ``diag(E E') dt`` from its unit-intensity white disturbances."""
+    noise variance ``diag(E E') dt`` from its unit-intensity white disturbances (``E`` from
+    :meth:`~marine_envs.models.VehicleModel.linearize` when not given)."""
     own = np.array([name in model.noise_model_states for name in model.state_names])
-    _, _, E = model.linearize()
+    if not own.any():
+        return own, np.zeros(len(own))
+    if E is None:
+        _, _, E = model.linearize()
     return own, np.sum(E * E, axis=1) * dt
 
 
@@ -297,12 +301,15 @@ def model_noise_spread(model: VehicleModel, channels: tuple[str, ...], dt: float
     """Variance ``(steps, m)`` that the model's own white disturbances (of its
     :attr:`~marine_envs.models.VehicleModel.noise_model_states`) add to a prediction of the
     ``channels`` 1..``steps`` samples ahead (linearised at the nominal point): what no
-    prediction can remove, however right the model."""
-    own, q = _model_process_noise(model, dt)
-    A, _, _ = model.linearize()
+    prediction can remove, however right the model. Zero for a model without them."""
+    out = np.zeros((steps, len(channels)))
+    if not model.noise_model_states:
+        return out
+    A, _, E = model.linearize()
+    own, q = _model_process_noise(model, dt, E)
     C = _output_matrix(model, channels)
     Phi, Q = linalg.expm(A * dt), np.diag(np.where(own, q, 0.0))
-    out, P = np.zeros((steps, len(channels))), np.zeros_like(Q)
+    P = np.zeros_like(Q)
     for k in range(steps):
         P = Phi @ P @ Phi.T + Q
         out[k] = np.einsum("ij,jk,ik->i", C, P, C)
