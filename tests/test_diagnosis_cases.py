@@ -3,6 +3,7 @@ no diagnosis is run, only the grading, the aggregates and the cases' effects."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from estimators.diagnosis import Diagnosis, Finding
@@ -128,6 +129,17 @@ def test_targets_cover_the_catalogue_and_build_valid_effects():
             effect = build_effect(model, entry, seed=0, duration=60.0)
             effect.check(vehicle)
             assert (effect.effect, effect.target) == entry[:2]
+
+
+def test_the_hydrofoil_s_input_effect_records_keep_it_flying():
+    # on the front flap the same effects crashed it (heave 1e6 m was recorded as a test case)
+    cases = [c for c in catalogue_cases(vehicles=("hydrofoil",), noises=(0.05,), effect_free=0,
+                                        duration=120.0)
+             if any(e.kind == "input" for e in c.effects)]
+    assert len(cases) == 6  # five input effects and a pair
+    for case in cases:
+        heave = case.recording().measurements[:, 0]
+        assert np.std(heave) < 1.0, case.name  # m
 
 
 def test_catalogue_cases_counts_and_seeds():

@@ -32,7 +32,8 @@ _INPUT_EFFECTS = ("input_gain", "input_delay", "input_saturation", "input_deadzo
 #: Per vehicle, each of the 15 catalogue effects once, on a target where it matters and where
 #: a record can tell it from the others: on the USV's linear roll model a roll-angle bias and
 #: a steady heel moment make the same record (the diagnosis reports both at confidence ~0.5),
-#: so the USV's sensor bias is on the yaw-rate gyro.
+#: so the USV's sensor bias is on the yaw-rate gyro. The hydrofoil's input effects are on its
+#: rear flap: its autopilot loses the craft with 5 % less gain on the front one.
 TARGETS: dict[str, list[Entry]] = {
     "usv": [("current", "r", {}), ("linear_damping", "p", {}), ("quadratic_damping", "r", {}),
             ("coupling", "p", {"source": "r"}),
@@ -44,7 +45,7 @@ TARGETS: dict[str, list[Entry]] = {
     "hydrofoil": [("current", "xi_dot", {}), ("linear_damping", "theta_dot", {}),
                   ("quadratic_damping", "xi_dot", {}),
                   ("coupling", "theta_dot", {"source": "xi_dot"}),
-                  *[(e, "alpha_s1", {}) for e in _INPUT_EFFECTS],
+                  *[(e, "alpha_s2", {}) for e in _INPUT_EFFECTS],
                   ("wave_frequency", "xi_dot", {}), ("parameter_change", "theta_dot", {}),
                   ("sensor_bias", "theta", {}), ("nonlinear_damping", "xi_dot", {}),
                   ("nonlinear_restoring", "theta_dot", {"source": "theta"}),
@@ -99,7 +100,7 @@ PARTIAL: dict[str, tuple[str, ...]] = {
 PAIRS: dict[str, list[tuple[Entry, Entry]]] = {
     "usv": [(("quadratic_damping", "r", {}), ("sensor_bias", "r", {})),
             (("input_delay", "delta", {}), ("current", "r", {}))],
-    "hydrofoil": [(("input_delay", "alpha_s1", {}), ("current", "xi_dot", {})),
+    "hydrofoil": [(("input_delay", "alpha_s2", {}), ("current", "xi_dot", {})),
                   (("quadratic_damping", "xi_dot", {}), ("sensor_bias", "theta", {}))],
     "hovercraft": [(("input_gain", "delta", {}), ("linear_damping", "v", {})),
                    (("quadratic_damping", "u", {}), ("sensor_bias", "psi", {}))],

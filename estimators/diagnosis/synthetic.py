@@ -37,7 +37,11 @@ from marine_envs.models.linear import dlqr, zoh
 from marine_envs.recording import Recording
 from marine_envs.sea.processes import GaussMarkov
 
+from .residuals import displacements
+
 DEG = math.pi / 180
+#: A closed loop whose speeds or rates pass this (m/s, rad/s) has lost the vehicle.
+LOST = 1e3
 #: Broadband sea per model: (standard deviation per disturbance channel, correlation time, s).
 SEA: dict[str, tuple[tuple[float, ...], float]] = {
     "usv": ((0.0003, 0.0003), 2.0),                     # wave moments, rad/s^2
@@ -77,6 +81,8 @@ def synthesize(model: str | VehicleModel, effects: Sequence[Effect] = (), *,
     :param params: parameter overrides of the nominal model.
     :param sea, dither, reference: scale the sea, the input dither and the reference steps.
     :param substeps: RK4 steps per sample.
+    :raises FloatingPointError: the closed loop loses the vehicle (a speed or rate beyond
+        :data:`LOST`, or not finite): the effects are too strong for the autopilot.
     """
     vehicle = get_model(model) if isinstance(model, str) else model
     vehicle = vehicle.with_params(**(params or {}))
@@ -251,6 +257,7 @@ def _closed_loop(truth: EffectModel, x_ref: np.ndarray, dt: float, sea: float, d
                             e.parameters.get("std", 1.0), steps, dt, rng)
                for k, e in enumerate(truth.effects) if e.effect == "wave_frequency"}
     actuator = ActuatorStream(vehicle, truth.effects, dt)
+    rates = _rates(vehicle)
     x = vehicle.x0.copy()
     states, commanded = np.empty((steps, x.size)), np.empty((steps, len(vehicle.input_names)))
     h = dt / substeps
@@ -264,8 +271,19 @@ def _closed_loop(truth: EffectModel, x_ref: np.ndarray, dt: float, sea: float, d
             return truth.rhs(z, a, dk, s, w)
 
         x = rk4(f, x, h, substeps, t=k * dt)
-        if not np.all(np.isfinite(x)):
+        lost = ~np.isfinite(x) | (rates & (np.abs(x) >= LOST))
+        if lost.any():
+            i = int(np.argmax(lost))
             raise FloatingPointError(f"the simulated {vehicle.name} diverged at "
-                                     f"t={(k + 1) * dt:.1f} s; the effects are too strong for "
-                                     "the controller")
+                                     f"t={(k + 1) * dt:.1f} s ({vehicle.state_names[i]} = "
+                                     f"{x[i]:.3g}); the effects are too strong for the "
+                                     "controller")
     return commanded, states
+
+
+def _rates(vehicle: VehicleModel) -> np.ndarray:
+    """Which states are speeds and rates: not positions or angles (which may grow with the
+    distance run), nor the states of the model's own disturbance model."""
+    kinematic = displacements(vehicle)
+    return np.array([i not in kinematic and name not in vehicle.noise_model_states
+                     for i, name in enumerate(vehicle.state_names)])
