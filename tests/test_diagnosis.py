@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from estimators.diagnosis import api, diagnose, read_params
+from estimators.diagnosis.cases import PARTIAL, Case, build_effect, run_case
 from estimators.diagnosis.synthetic import synthesize, typical_effect
 from marine_envs.recording import Recording
 
@@ -85,6 +86,24 @@ def test_a_recording_of_another_model_is_refused():
     recording = synthesize("usv", duration=100, noise=0.05)
     diagnosis = diagnose(recording, model="hovercraft")
     assert diagnosis.mismatch is None and "not 'hovercraft'" in diagnosis.reason
+
+
+def test_a_missing_actuator_effect_is_not_taken_for_a_wrong_model():
+    # without its rear flap's delay the hydrofoil's nominal predicts heave and pitch 2.2x worse
+    # than holding the last sample; the record was refused as not this vehicle's
+    effect = build_effect("hydrofoil", ("input_delay", "alpha_s2", {}), seed=1)
+    outcome = run_case(Case("hydrofoil", (effect,), 0.05, 1, measured=PARTIAL["hydrofoil"]))
+    assert outcome.ranked_right and not outcome.reason, outcome
+
+
+def test_a_model_its_findings_cannot_mend_is_refused_naming_them(monkeypatch):
+    monkeypatch.setattr(api, "WORSE_THAN_HOLDING", 0.0)  # every model too poor to predict
+    effect = typical_effect("usv", "current", "r", strength=0.5, duration=120)
+    diagnosis = diagnose(synthesize("usv", [effect], seed=1, noise=0.05, duration=120))
+    assert diagnosis.mismatch is None
+    assert "does not describe this recording" in diagnosis.reason
+    assert "current on r" in diagnosis.reason  # what was tried
+    assert [(f.effect, f.target) for f in diagnosis.unconfirmed][0] == ("current", "r")
 
 
 def test_wrong_parameters_are_flagged_or_calibrated():

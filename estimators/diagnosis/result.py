@@ -130,6 +130,11 @@ class Diagnosis:
             if sea >= 0.5:
                 lines.append(f"  (the model's own sea model expects {sea:.0%} of the held-out "
                              "prediction error: the improvement is measured against it)")
+        holding = self.model_check.get("worse_than_holding")
+        if holding:
+            lines.append(f"  (the nominal model alone predicts {holding['nominal']:.1f}x worse "
+                         "than holding the last sample; with the findings "
+                         f"{holding['with_findings']:.1f}x)")
         for channel, left in self.unexplained.items():
             lines.append(f"  unexplained in {channel}: {_with_unit(left['rmse'], left['unit'])}"
                          f" RMS held-out ({left['share_of_signal']:.0%} of the signal)")

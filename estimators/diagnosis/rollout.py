@@ -20,6 +20,9 @@ from marine_envs.models.integrate import rk4
 from .residuals import Residuals, model_noise_spread
 
 FloatArray = NDArray[np.float64]
+#: A prediction that runs off (a wild trial value) is pinned here, in channel units, so that
+#: its squared error stays finite.
+DIVERGED = 1e6
 
 
 class Rollouts:
@@ -83,7 +86,7 @@ class Rollouts:
                 x = rk4(f, x, h, t=res.time[k] + m * h)
             outputs = x if self._outputs_are_states else model.output(x)
             out[:, j] = truth.measure(outputs[:, self.channel_index], res.channels)
-        return np.nan_to_num(out, nan=1e6, posinf=1e6, neginf=-1e6)
+        return np.clip(np.nan_to_num(out, nan=DIVERGED), -DIVERGED, DIVERGED)
 
     def errors(self, effects: Sequence[Effect],
                forcing: Mapping[int, FloatArray] | None = None,

@@ -114,6 +114,9 @@ class Selection:
     ranking: list[Scored]
     tried: int
     combined_improvement: float = 0.0
+    #: per-start weighted held-out prediction errors with the findings refitted on the first
+    #: part (set by the api's validation)
+    validated_errors: FloatArray | None = None
 
 
 # -- least squares on the innovations -------------------------------------------------------------
