@@ -13,8 +13,15 @@ from marine_envs.models import get_model
 
 
 def _forcing(residuals, state):
-    names = residuals.model.state_names
-    return next(f for f in residuals.forcing if names[f.state] == state)
+    """The forcing in ``state``'s equation: its own or an environment channel's."""
+    i = residuals.model.state_names.index(state)
+    return next(f for f in residuals.forcing if i in f.equations)
+
+
+def _environment(residuals):
+    model = residuals.model
+    return {model.disturbance_names[f.disturbance]: f for f in residuals.forcing
+            if f.disturbance is not None}
 
 
 def test_the_sea_is_modelled_with_its_own_correlation_time():
@@ -22,7 +29,24 @@ def test_the_sea_is_modelled_with_its_own_correlation_time():
     residuals = estimate(synthesize(model, seed=102, noise=0.05), model)
     true_tau = SEA["usv"][1]  # the generator's wave moments: Gauss-Markov, 2 s
     assert _forcing(residuals, "r").tau == pytest.approx(true_tau, rel=0.5)
-    assert {model.state_names[f.state] for f in residuals.forcing} == {"r", "p"}  # measured
+    # the wave moments are added to the equations: each measured one keeps a forcing of its own
+    assert not _environment(residuals)
+    assert {model.state_names[f.state] for f in residuals.forcing} == {"r", "p"}
+
+
+def test_a_slow_current_is_the_environment_not_a_finding():
+    # the ROV's current is a 60-s Gauss-Markov process; fitted to the equation errors (where
+    # the thrust that holds against it removes it) its time scale came out as 2-3 s, and this
+    # effect-free record got a confident constant force on u
+    rov = get_model("rov")
+    recording = synthesize(rov, seed=100, noise=0.05)
+    current = _environment(estimate(recording, rov))
+    assert set(current) == {"current_n", "current_e", "current_d"}  # not the morph command
+    assert all(f.tau > 15.0 for f in current.values())
+    diagnosis = diagnose(recording, rov)
+    assert not [f for f in diagnosis.findings if f.confidence >= 0.5], diagnosis.findings
+    noise_model = diagnosis.to_dict()["noise_model"]
+    assert {"disturbance": "current_n", "unit": "m/s"}.items() <= noise_model[-3].items()
 
 
 def test_a_missing_term_stays_a_model_error_not_forcing():
@@ -67,3 +91,10 @@ def test_the_sea_share_is_reported_when_the_model_carries_a_sea():
     effect = build_effect("dp_vessel", ("linear_damping", "v", {}), seed=6)
     diagnosis = diagnose(synthesize(dp, [effect], seed=6, noise=0.05), dp)
     assert 0.0 < diagnosis.fit["expected_from_sea"] <= 1.0
+
+
+def test_an_environment_the_measurements_cannot_determine_forces_each_equation():
+    hydrofoil = get_model("hydrofoil")  # six sea channels, two force equations
+    residuals = estimate(synthesize(hydrofoil, seed=3, noise=0.05, duration=100.0), hydrofoil)
+    assert not _environment(residuals)
+    assert {hydrofoil.state_names[f.state] for f in residuals.forcing} == {"xi_dot", "theta_dot"}

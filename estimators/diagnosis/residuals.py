@@ -15,14 +15,18 @@ filter takes for white biases every fit of a term that the controller correlates
 direct prediction-error method is consistent only with the right noise model). So the last pass
 gives each measured force equation a first-order Gauss-Markov forcing state, its correlation
 time and variance read off the part of the first pass's equation errors that is not a function
-of the state and input (:func:`forcing_model`).
+of the state and input (:func:`forcing_model`). Where the model names its environment (a
+hovercraft's wind, a ROV's current: ``VehicleModel.environment_disturbances``) and the measured
+equations determine it, that forcing is the environment itself, estimated as Gauss-Markov
+states that enter through the model's own equations: a wind or current acts on the relative
+velocity, so its effect depends on the state, which an additive forcing cannot mimic.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +49,18 @@ FOLLOW_MODEL = 1e-3
 #: Gauss-Markov forcing state, and taken from the forcing's (keeps the filter from trusting the
 #: forcing model blindly).
 WHITE_SHARE = 0.1
+#: An equation keeps a forcing of its own only if the environment leaves at least this share
+#: of its error variance.
+MINOR = 0.01
+#: The environment's prior before its statistics are known: a Gauss-Markov process with this
+#: share of the record as correlation time, and this many times the spread of its estimate
+#: from the equation errors (which misses its slow part).
+BROAD_TAU, BROAD = 0.25, 2.0
+#: Passes that re-estimate the environment's statistics, each under the last one's (an EM
+#: iteration: the first, under the broad prior, smooths a fast sea into a slower one).
+ENVIRONMENT_PASSES = 2
+#: Finite-difference step of the sensitivity to a disturbance channel, in its units.
+STEP = 1e-3
 
 
 @dataclass
@@ -185,8 +201,12 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
         q = np.where(own, own_q, np.where(measured, variance * dt**2, q * FOLLOW_MODEL))
         if k == passes - 2:
             forcing = forcing_model(model, x, u, error, measured, dt)
-            for f in forcing:
-                q[f.state] *= WHITE_SHARE
+            forced = sorted({i for f in forcing for i in f.equations})
+            q[forced] *= WHITE_SHARE
+            for _ in range(ENVIRONMENT_PASSES if any(f.disturbance is not None
+                                                     for f in forcing) else 0):
+                forcing = environment_statistics(model, dt, channels, q, noise, x0, P0,
+                                                 substeps, forcing, u, y)
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
                      error, noise, observable_states(model, channels), substeps,
                      Innovations.from_filter(ekf, smoothed.filtered, dt, n), tuple(forcing))
@@ -194,36 +214,112 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
 
 @dataclass(frozen=True)
 class Forcing:
-    """A first-order Gauss-Markov forcing in state ``state``'s equation:
-    ``zeta' = -zeta / tau + white``, stationary ``variance`` (state units per s, squared)."""
+    """A first-order Gauss-Markov forcing ``zeta' = -zeta / tau + white``, stationary
+    ``variance``: added to state ``state``'s equation (state units per s), or, with
+    ``disturbance`` set, the model's disturbance channel of that index (its own units), which
+    enters through the model's equations ``equations``."""
 
-    state: int
+    state: int | None
     tau: float
     variance: float
+    disturbance: int | None = None
+    equations: tuple[int, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.equations and self.state is not None:
+            object.__setattr__(self, "equations", (self.state,))
 
 
 def forcing_model(model: VehicleModel, x: FloatArray, u: FloatArray, error: FloatArray,
                   measured: NDArray[np.bool_], dt: float) -> list[Forcing]:
-    """A Gauss-Markov forcing for each measured force equation (not the kinematics), fitted to
-    what of its equation error is not a function of the present state and input (a missing
-    term is; it must stay a model error, not become forcing): its variance, and its
-    correlation time ``1 / omega_c`` where its spectrum falls to half its peak (a sea's
-    forcing is low-pass)."""
+    """The coloured forcing of the measured force equations (not the kinematics), fitted to
+    what of their equation errors is not a function of the present state and input (a missing
+    term is; it must stay a model error, not become forcing).
+
+    The model's environment channels come first, where these equations determine them: here
+    only a broad prior for :func:`environment_statistics` (least squares through the model's
+    sensitivity to them, sample by sample). Each equation then gets a Gauss-Markov forcing for
+    what the environment leaves: its variance, and its correlation time ``1 / omega_c`` where
+    its spectrum falls to half its peak (a sea's forcing is low-pass).
+    """
     regressors = _state_functions(x[:-1], u[:-1])
     exogenous = error - regressors @ np.linalg.lstsq(regressors, error, rcond=None)[0]
     kinematic = displacements(model)
-    out = []
-    for i in np.flatnonzero(measured):
-        if i in kinematic:
-            continue  # nothing forces a kinematic equation
+    rows = [int(i) for i in np.flatnonzero(measured) if i not in kinematic]
+    out, explained = _environment_prior(model, x[:-1], u[:-1], exogenous, rows, dt)
+    exogenous[:, rows] -= explained
+    for i in rows:
         e = exogenous[:, i]
+        if out and np.var(e) < MINOR * np.var(error[:, i]):
+            continue  # the environment is all of it
         f, psd = signal.welch(e, fs=1 / dt, nperseg=max(len(e) // 4, 8))
         omega, level = 2 * np.pi * f[1:], psd[1:]
         peak = int(np.argmax(level))
         below = np.flatnonzero(level[peak:] < level[peak] / 2)
         corner = omega[peak + below[0]] if below.size else omega[-1]
-        out.append(Forcing(int(i), float(1 / corner), float((1 - WHITE_SHARE) * np.var(e))))
+        out.append(Forcing(i, float(1 / corner), float((1 - WHITE_SHARE) * np.var(e))))
     return out
+
+
+def _environment_prior(model: VehicleModel, x: FloatArray, u: FloatArray,
+                       exogenous: FloatArray, rows: list[int], dt: float
+                       ) -> tuple[list[Forcing], FloatArray]:
+    """Broad Gauss-Markov priors of the environment channels (:data:`BROAD_TAU` of the record,
+    :data:`BROAD` times the spread their least-squares estimate from the ``rows``' equation
+    errors has) and what that estimate explains of these errors ``(T, len(rows))``. None when
+    the rows do not determine the channels, or when the channels act the same whatever the
+    state (then they are the equations' own forcings)."""
+    channels = [model.disturbance_names.index(c) for c in model.environment_disturbances]
+    none = ([], np.zeros((len(x), len(rows))))
+    if not channels or len(channels) > len(rows):
+        return none
+    base = model.rhs(x, u)
+    D = np.empty((len(x), len(rows), len(channels)))  # sensitivity to each channel
+    for j, c in enumerate(channels):
+        d = np.zeros((len(x), len(model.disturbance_names)))
+        d[:, c] = STEP
+        D[:, :, j] = (model.rhs(x, u, d) - base)[:, rows] / STEP
+    if np.linalg.matrix_rank(D.reshape(-1, len(channels))) < len(channels):
+        return none  # a channel moves no measured equation
+    if np.ptp(D, axis=0).max() <= 1e-6 * np.abs(D).max():
+        return none  # additive (the USV's wave moments): each equation's own forcing is it
+    values = (np.linalg.pinv(D) @ exogenous[:, rows, None])[..., 0]  # (T, channels)
+    reaches = np.abs(D).max(axis=0) > 0  # (rows, channels)
+    tau = BROAD_TAU * len(x) * dt
+    out = [Forcing(None, tau, BROAD**2 * float(np.var(v)), c,
+                   tuple(rows[i] for i in np.flatnonzero(reaches[:, j])))
+           for j, (c, v) in enumerate(zip(channels, values.T, strict=True))]
+    return out, np.einsum("trc,tc->tr", D, values)
+
+
+def environment_statistics(model: VehicleModel, dt: float, channels: tuple[str, ...],
+                           q: FloatArray, noise: FloatArray, x0: FloatArray, P0: FloatArray,
+                           substeps: int, forcing: list[Forcing], u: FloatArray, y: FloatArray
+                           ) -> list[Forcing]:
+    """The environment channels' Gauss-Markov statistics from the filter itself: smoothed as
+    states under their present statistics, then each series' decorrelation time and variance,
+    the latter at most the present one (the first is the broad prior of
+    :func:`forcing_model`: a smoother free to move the environment would take a missing term
+    for it). The equation errors alone cannot show a slow current or wind: under control the
+    thrust that holds against it is a function of the input, which their fit removes."""
+    own = [f for f in forcing if f.disturbance is None]
+    environment = [f for f in forcing if f.disturbance is not None]
+    z = _filter(model, dt, channels, q, noise, x0, P0, substeps, own + environment
+                ).smooth(u, y).x[:, 0, len(model.state_names) + len(own):]
+    return own + [replace(f, tau=_decorrelation_time(e, dt, f.tau),
+                          variance=min(float(np.var(e)), f.variance))
+                  for f, e in zip(environment, z.T, strict=True)]
+
+
+def _decorrelation_time(series: FloatArray, dt: float, longest: float) -> float:
+    """Lag, s, at which the autocorrelation of ``series`` first falls below ``1/e`` (a
+    Gauss-Markov process's correlation time; a smoothed series has lost its fast part, so the
+    shape of its spectrum would not tell), at most ``longest``."""
+    e = series - series.mean()
+    spectrum = np.fft.rfft(e, 2 * len(e))
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:len(e)]
+    below = np.flatnonzero(acf < acf[0] / math.e)
+    return float(min(below[0] * dt, longest)) if below.size and acf[0] > 0 else longest
 
 
 def _state_functions(x: FloatArray, u: FloatArray) -> FloatArray:
@@ -238,20 +334,28 @@ def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatA
             noise: FloatArray, x0: FloatArray, P0: FloatArray, substeps: int,
             forcing: Sequence[Forcing]) -> ExtendedKalmanFilter:
     """The nominal model's filter with per-step process noise ``q`` on the states and, after
-    them, the ``forcing`` states (zero mean, their stationary variance as prior)."""
+    them, the ``forcing`` states (zero mean, their stationary variance as prior): the
+    equations' own forcings, then the environment's channels."""
     if not forcing:
         return ExtendedKalmanFilter.from_model(model, dt, measured=channels, Q=np.diag(q),
                                                R=np.diag(noise**2), x0=x0, P0=P0,
                                                substeps=substeps)
     n = len(model.state_names)
-    rows = np.array([f.state for f in forcing])
+    own = [f for f in forcing if f.disturbance is None]
+    environment = [f for f in forcing if f.disturbance is not None]
+    forcing = own + environment
+    rows = np.array([f.state for f in own], dtype=int)
+    channels_d = np.array([f.disturbance for f in environment], dtype=int)
     tau = np.array([f.tau for f in forcing])
     variance = np.array([f.variance for f in forcing])
     outputs = [model.output_names.index(c) for c in channels]
+    n_d = len(model.disturbance_names)
 
     def f(z: FloatArray, u: FloatArray, _theta: FloatArray) -> FloatArray:
-        x_dot = model.rhs(z[:, :n], u)
-        x_dot[:, rows] += z[:, n:]
+        d = np.zeros((len(z), n_d))
+        d[:, channels_d] = z[:, n + len(rows):]
+        x_dot = model.rhs(z[:, :n], u, d)
+        x_dot[:, rows] += z[:, n:n + len(rows)]
         return np.concatenate([x_dot, -z[:, n:] / tau], axis=1)
 
     def h(z: FloatArray) -> FloatArray:
@@ -259,10 +363,11 @@ def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatA
 
     decay = np.exp(-2 * dt / tau)
     Q = np.diag(np.concatenate([q, variance * (1 - decay)]))
-    names = [f"forcing_{model.state_names[i]}" for i in rows]
+    names = ([f"forcing_{model.state_names[i]}" for i in rows]
+             + [model.disturbance_names[c] for c in channels_d])
     return ExtendedKalmanFilter(f, h, dt=dt, Q=Q, R=np.diag(noise**2), n_inputs=len(
         model.input_names), state_names=(*model.state_names, *names), measurement_names=channels,
-        x0=np.concatenate([x0, np.zeros(len(rows))]),
+        x0=np.concatenate([x0, np.zeros(len(forcing))]),
         P0=linalg.block_diag(P0, np.diag(variance)), substeps=substeps)
 
 

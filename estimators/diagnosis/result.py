@@ -13,7 +13,7 @@ import numpy as np
 
 from marine_envs.models.effects import Effect
 
-from .residuals import Residuals
+from .residuals import Forcing, Residuals
 from .rollout import Rollouts
 from .selection import Selection
 
@@ -71,8 +71,9 @@ class Diagnosis:
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (see the issue's schema), with plain Python numbers; also
-        ``unconfirmed`` findings, the ``calibration`` and the ``noise_model`` (each force
-        equation's coloured forcing: correlation time, s, and std, state units per s)."""
+        ``unconfirmed`` findings, the ``calibration`` and the ``noise_model`` (the coloured
+        forcing: each environment channel the filter estimated, std in its units, and each
+        force equation's own, std in state units per s; correlation times, s)."""
         out = {"model": self.model, "mismatch": self.mismatch, "channels": self.channels,
                "windows": self.windows, "band": self.band,
                "findings": [_finding_dict(f) for f in self.findings], "fit": self.fit}
@@ -86,9 +87,7 @@ class Diagnosis:
             if getattr(self, key):
                 out[key] = getattr(self, key)
         if self.residuals is not None and self.residuals.forcing:
-            names = self.residuals.model.state_names
-            out["noise_model"] = [{"equation": names[f.state], "correlation_time": f.tau,
-                                   "std": math.sqrt(f.variance)}
+            out["noise_model"] = [_forcing_dict(f, self.residuals.model)
                                   for f in self.residuals.forcing]
         return json.loads(json.dumps(out, default=_plain))
 
@@ -142,6 +141,15 @@ class Diagnosis:
             lines.append(f"  {alt['equally']} explains the data as well as {alt['chosen']}; "
                          f"to separate them: {alt['separate_by']}")
         return "\n".join(lines + withdrawn)
+
+
+def _forcing_dict(f: Forcing, model: Any) -> dict[str, Any]:
+    tau, std = f.tau, math.sqrt(f.variance)
+    if f.disturbance is None:
+        return {"equation": model.state_names[f.state], "correlation_time": tau, "std": std}
+    return {"disturbance": model.disturbance_names[f.disturbance],
+            "unit": model.disturbance_units[f.disturbance], "correlation_time": tau, "std": std,
+            "equations": [model.state_names[i] for i in f.equations]}
 
 
 def _finding_dict(f: Finding) -> dict[str, Any]:

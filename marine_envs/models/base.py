@@ -55,6 +55,14 @@ class VehicleModel(ABC):
     #: so a diagnosis takes their process noise from the model and looks for no term in them.
     noise_model_states: ClassVar[tuple[str, ...]] = ()
 
+    @property
+    def environment_disturbances(self) -> tuple[str, ...]:
+        """The disturbance channels that are the environment (sea, wind, current), not a
+        command nor the white noise of the model's own disturbance model: what a filter that
+        does not measure them may estimate as coloured states. Default: every channel, none
+        for a model with :attr:`noise_model_states`."""
+        return () if self.noise_model_states else self.disturbance_names
+
     def __init__(self, params: Any) -> None:
         self.params = params
 

@@ -302,6 +302,11 @@ class ROVModel(VehicleModel):
 
     # -- nominal point, bounds, shape ---------------------------------------------------------
     @property
+    def environment_disturbances(self) -> tuple[str, ...]:
+        """The current (``s_cmd`` is the morph command, not the environment)."""
+        return ("current_n", "current_e", "current_d")
+
+    @property
     def x0(self) -> FloatArray:
         """Cruise at ``u = 1.5 m/s``, depth 5 m, level, heading north, cruise shape (s = 0)."""
         return self._x0.copy()
