@@ -285,11 +285,13 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--out", required=True, help="output file, .csv or .parquet")
     sim.add_argument("--policy", choices=POLICIES, default="prbs",
                      help="excitation: zero, sine, random (held uniform levels), prbs (held "
-                          "+-amplitude levels), or lqr (closed loop on the sensors); default prbs")
+                          "+-amplitude levels), or lqr (closed loop on the sensors; with "
+                          "--amplitude, plus a random-step dither held --hold s: a closed-loop "
+                          "identification experiment); default prbs")
     sim.add_argument("--amplitude", type=float, help="excitation amplitude, fraction of the "
-                                                     "actuator range (0.3)")
+                                                     "actuator range (0.3; lqr: none)")
     sim.add_argument("--period", type=float, help="sine period, s (20)")
-    sim.add_argument("--hold", type=float, help="random/prbs hold time, s (5)")
+    sim.add_argument("--hold", type=float, help="random/prbs hold time, s (5; lqr's dither 2)")
     sim.add_argument("--env-kwargs", metavar="JSON",
                      help='environment arguments, SI units, e.g. \'{"hs": 3.0, "tp": 9}\'')
     sim.add_argument("--quiet", action="store_true", help="no progress bar")

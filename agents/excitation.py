@@ -79,5 +79,20 @@ class RandomSteps(Excitation):
         return self._level
 
 
+class Dithered:
+    """A feedback policy plus an excitation on its actions: the closed-loop identification
+    experiment (the loop holds the vehicle near its operating point, the dither keeps every
+    input moving so that a model can be judged on the record)."""
+
+    def __init__(self, policy: Any, dither: Excitation) -> None:
+        self.policy, self.dither = policy, dither
+
+    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[NDArray[np.float32], None]:
+        action, _ = self.policy.predict(observation, state, episode_start, deterministic)
+        offset, _ = self.dither.predict()
+        return np.clip(action + offset, -1.0, 1.0).astype(np.float32), None
+
+
 SIGNALS = {"zero": Zero, "sine": Sine, "random": RandomSteps,
            "prbs": lambda n, dt, **kw: RandomSteps(n, dt, binary=True, **kw)}

@@ -12,17 +12,33 @@ import marine_envs  # noqa: F401  (registers the environments)
 from marine_envs.recording import Recording
 
 from .evaluation import run_episode
-from .excitation import SIGNALS
+from .excitation import SIGNALS, Dithered, RandomSteps
 from .lqr import LQRPolicy
 
 POLICIES = (*SIGNALS, "lqr")
 
 
+#: Hold time of the dither on ``lqr``, s: the random steps the diagnosis's own generator uses.
+DITHER_HOLD = 2.0
+
+
 def make_policy(name: str, env: Any, seed: int | None, **options: float) -> Any:
     """An excitation signal (``zero``, ``sine``, ``random``, ``prbs``) about the vehicle's
-    nominal input, or ``lqr`` for ``env``."""
+    nominal input, or ``lqr`` for ``env``: with ``amplitude`` (a share of each actuator's half
+    range) and optionally ``hold`` (s), LQR plus a random-step dither on every input."""
     if name == "lqr":
-        return LQRPolicy.for_env(env)
+        unknown = sorted(set(options) - {"amplitude", "hold"})
+        if unknown:
+            raise ValueError(f"policy 'lqr' takes amplitude and hold (a dither), not {unknown}")
+        lqr = LQRPolicy.for_env(env)
+        if not options.get("amplitude"):
+            if "hold" in options:
+                raise ValueError("policy 'lqr': a dither hold needs a dither amplitude")
+            return lqr
+        dither = RandomSteps(env.action_space.shape[0], env.unwrapped.dt, seed=seed,
+                             amplitude=options["amplitude"],
+                             hold=options.get("hold", DITHER_HOLD))
+        return Dithered(lqr, dither)
     if name not in SIGNALS:
         raise ValueError(f"unknown policy {name!r}; choose from {', '.join(POLICIES)}")
     n_inputs = env.action_space.shape[0]
@@ -47,7 +63,8 @@ def simulate(env_id: str, steps: int, seed: int | None = None, policy: str = "pr
     measurements = {name: episode.observations[:, i]
                     for i, name in enumerate(sim.sensors.channels)}
     params = dataclasses.asdict(sim.model.params)
-    meta = {"env": env_id, "seed": seed, "policy": policy, "dt": sim.dt,
+    meta = {"env": env_id, "seed": seed, "policy": policy,
+            "policy_options": dict(policy_options), "dt": sim.dt,
             "env_kwargs": dict(env_kwargs or {}), "terminated": episode.terminated}
     return Recording.from_arrays(sim.model.name, episode.time, episode.inputs, measurements,
                                  params=params, meta=meta)

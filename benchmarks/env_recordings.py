@@ -4,16 +4,20 @@ LQR autopilot, not the diagnosis's generator (``estimators.diagnosis.synthesize`
 
 Each case hides one catalogue effect in the environment (``gym.make(ENV_ID, effects=[...])``,
 the effect sized by :func:`estimators.diagnosis.typical_effect` at strength 0.3), records 300 s
-under the environment's LQR policy (``agents.simulate``: applied inputs, sensor outputs) and
-diagnoses the record against the nominal model with the default settings. It is scored as the
+of a closed-loop identification experiment (``agents.simulate``, policy ``lqr`` with a
+random-step dither on every input of the share of its half range that the diagnosis's own
+generator uses; ``--dither 0``: the autopilot alone) and diagnoses the record against the
+nominal model with the default settings. It is scored as the
 acceptance set is (``estimators.diagnosis.cases.score``): the effect and target ranked first,
 its key parameter within 30 %, and no confident finding on an effect-free record. Nothing in
-the diagnosis was tuned on these cases: every number is held out.
+the diagnosis was tuned on these cases; seeds 0 and 1 were looked at while it was built
+(issue 22), so seeds 2 and 3 are the held-out ones to quote.
 
 Only state effects and sensor biases: the environment records the inputs its actuators applied,
 so an actuator effect is inside the recorded input and no diagnosis could see it.
 
-    python benchmarks/env_recordings.py [--vehicles usv,rov] [--seeds 0,1] [--json out.json]
+    python benchmarks/env_recordings.py [--vehicles usv,rov] [--seeds 0,1] [--dither 0]
+                                        [--json out.json]
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from tqdm import tqdm
 from agents.simulate import simulate
 from estimators.diagnosis import typical_effect
 from estimators.diagnosis.cases import Case, run_case, summarize
+from estimators.diagnosis.synthetic import DEFAULT_DITHER_SHARE, DITHER_SHARE
 from marine_envs.models.effects import Effect
 
 #: Vehicle -> environment id and the effects hidden in it (effect, target, extra parameters).
@@ -48,6 +53,11 @@ VEHICLES: dict[str, tuple[str, list[tuple[str, str, dict[str, str]]]]] = {
                                                  ("linear_damping", "v", {}),
                                                  ("sensor_bias", "psi", {})]),
 }
+#: Environment settings beyond the defaults. The ROV's morph command is a disturbance channel
+#: of its model that the recording format cannot carry (it records inputs and sensors only):
+#: with a morph no model follows the record ("the model does not describe this recording" on
+#: all ten records of seeds 0 and 1), so its cases keep the cruise shape.
+ENV_KWARGS: dict[str, dict[str, object]] = {"rov": {"morph_time": None, "morph_window": None}}
 DURATION = 300.0
 
 
@@ -64,13 +74,16 @@ def cases(vehicles: Sequence[str], seeds: Sequence[int]) -> list[tuple[str, Case
     return out
 
 
-def run(env_id: str, case: Case):
-    """Record the case in its environment and diagnose it."""
+def run(env_id: str, case: Case, dither: float | None = None):
+    """Record the case in its environment (``dither``: share of each input's half range, None
+    for the generator's) and diagnose it."""
     probe = simulate(env_id, 2, seed=case.seed, policy="lqr")
     steps = int(DURATION / float(probe.meta["dt"]))
     effects: list[Effect] = list(case.effects)
-    recording = simulate(env_id, steps, seed=case.seed, policy="lqr",
-                         env_kwargs={"effects": effects} if effects else None)
+    share = DITHER_SHARE.get(case.model, DEFAULT_DITHER_SHARE) if dither is None else dither
+    env_kwargs = {**ENV_KWARGS.get(case.model, {}), **({"effects": effects} if effects else {})}
+    recording = simulate(env_id, steps, seed=case.seed, policy="lqr", env_kwargs=env_kwargs,
+                         **({"amplitude": share} if share > 0 else {}))
     return run_case(case, recording)
 
 
@@ -80,6 +93,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--vehicles", default=",".join(VEHICLES),
                         help=f"comma-separated, of {', '.join(VEHICLES)} (default: all)")
     parser.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
+    parser.add_argument("--dither", type=float, metavar="SHARE",
+                        help="dither on every input, share of its half range (default: the "
+                             "diagnosis generator's, 0.15; the hydrofoil 0.04); 0: the "
+                             "autopilot alone")
     parser.add_argument("--json", metavar="OUT", help="write every outcome as JSON")
     args = parser.parse_args(argv)
     vehicles = [v.strip() for v in args.vehicles.split(",") if v.strip()]
@@ -88,7 +105,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"unknown vehicle(s) {unknown}; choose from {', '.join(VEHICLES)}")
     seeds = [int(s) for s in args.seeds.split(",")]
     start = time.perf_counter()
-    outcomes = [run(env_id, case) for env_id, case in tqdm(cases(vehicles, seeds),
+    outcomes = [run(env_id, case, args.dither) for env_id, case in tqdm(cases(vehicles, seeds),
                                                            desc="diagnosing", unit="case")]
     print("| case | found (confidence) | improvement | right | key parameter | s |")
     print("| --- | --- | ---: | --- | --- | ---: |")

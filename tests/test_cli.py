@@ -115,3 +115,24 @@ def test_help_explains_every_command(capsys):
     out = capsys.readouterr().out
     for command in ("demo", "simulate", "episode", "reproduce", "envs"):
         assert command in out
+
+
+def test_lqr_with_a_dither_is_a_closed_loop_identification_experiment(tmp_path, capsys):
+    runs = {}
+    for name, extra in (("plain", []), ("dithered", ["--amplitude", "0.15", "--hold", "2"])):
+        out = tmp_path / f"{name}.csv"
+        assert main(["simulate", "--env", "marine_envs/Hovercraft-v0", "--steps", "600",
+                     "--seed", "3", "--policy", "lqr", "--out", str(out), "--quiet", *extra]) == 0
+        runs[name] = read_recording(out)
+    plain, dithered = (runs[k] for k in ("plain", "dithered"))
+    rudder = plain.input_names.index("delta")
+    # the dither moves every input well beyond what the loop alone does ...
+    assert np.all(np.std(dithered.inputs, axis=0) > 2 * np.std(plain.inputs, axis=0))
+    # ... while the loop still holds the heading (within 5 deg of the plain run's)
+    psi = plain.measured_names.index("psi")
+    assert np.abs(dithered.measurements[:, psi] - plain.measurements[:, psi]).max() < np.radians(5)
+    assert np.abs(dithered.inputs[:, rudder]).max() <= np.radians(35) + 1e-12
+    assert dithered.meta["policy_options"] == {"amplitude": 0.15, "hold": 2.0}
+    assert main(["simulate", "--policy", "lqr", "--period", "3", "--steps", "10", "--quiet",
+                 "--out", str(tmp_path / "x.csv")]) == 2
+    assert "amplitude and hold" in capsys.readouterr().err

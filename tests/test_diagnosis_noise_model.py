@@ -4,6 +4,7 @@ fluctuation from becoming a finding."""
 import numpy as np
 import pytest
 
+from agents.simulate import simulate
 from estimators.diagnosis import diagnose
 from estimators.diagnosis.cases import Case, build_effect, run_case
 from estimators.diagnosis.hypotheses import _in_both_halves, _targets
@@ -47,6 +48,18 @@ def test_a_slow_current_is_the_environment_not_a_finding():
     assert not [f for f in diagnosis.findings if f.confidence >= 0.5], diagnosis.findings
     noise_model = diagnosis.to_dict()["noise_model"]
     assert {"disturbance": "current_n", "unit": "m/s"}.items() <= noise_model[-3].items()
+
+
+def test_a_steady_wind_is_estimated_with_the_environment():
+    # the hovercraft environment's 5 m/s wind from the north-east, under a dithered LQR: the
+    # filter carries the mean wind as constant states (zero-mean gusts alone left it to the
+    # findings: a sensor bias on v, a constant surge force)
+    recording = simulate("marine_envs/Hovercraft-v0", 3000, seed=7, policy="lqr",
+                         amplitude=0.15)
+    wind = _environment(estimate(recording, get_model("hovercraft")))
+    truth = -5.0 * np.cos(np.radians(45.0))  # blowing to the south-west: both components < 0
+    assert wind["wind_north"].level == pytest.approx(truth, abs=0.5)
+    assert wind["wind_east"].level == pytest.approx(truth, abs=0.5)
 
 
 def test_a_missing_term_stays_a_model_error_not_forcing():

@@ -18,8 +18,9 @@ time and variance read off the part of the first pass's equation errors that is 
 of the state and input (:func:`forcing_model`). Where the model names its environment (a
 hovercraft's wind, a ROV's current: ``VehicleModel.environment_disturbances``) and the measured
 equations determine it, that forcing is the environment itself, estimated as Gauss-Markov
-states that enter through the model's own equations: a wind or current acts on the relative
-velocity, so its effect depends on the state, which an additive forcing cannot mimic.
+states, each with a steady part (a mean wind or current, a constant state), that enter through
+the model's own equations: a wind or current acts on the relative velocity, so its effect
+depends on the state, which an additive forcing cannot mimic.
 """
 
 from __future__ import annotations
@@ -56,6 +57,9 @@ MINOR = 0.01
 #: share of the record as correlation time, and this many times the spread of its estimate
 #: from the equation errors (which misses its slow part).
 BROAD_TAU, BROAD = 0.25, 2.0
+#: Prior spread of a steady environment (a mean wind or current), in units of that estimate's
+#: spread: broad, since the equation errors cannot show a steady part (the fit removes it).
+STEADY = 5.0
 #: Passes that re-estimate the environment's statistics, each under the last one's (an EM
 #: iteration: the first, under the broad prior, smooths a fast sea into a slower one).
 ENVIRONMENT_PASSES = 2
@@ -209,7 +213,8 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
                                                  substeps, forcing, u, y)
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
                      error, noise, observable_states(model, channels), substeps,
-                     Innovations.from_filter(ekf, smoothed.filtered, dt, n), tuple(forcing))
+                     Innovations.from_filter(ekf, smoothed.filtered, dt, n),
+                     _with_levels(forcing, smoothed.x[:, 0, n + len(forcing):]))
 
 
 @dataclass(frozen=True)
@@ -217,13 +222,17 @@ class Forcing:
     """A first-order Gauss-Markov forcing ``zeta' = -zeta / tau + white``, stationary
     ``variance``: added to state ``state``'s equation (state units per s), or, with
     ``disturbance`` set, the model's disturbance channel of that index (its own units), which
-    enters through the model's equations ``equations``."""
+    enters through the model's equations ``equations``. Such a channel may also have a steady
+    part (a mean wind or current): a constant the filter estimates, ``level`` (the channel's
+    units), under the prior variance ``steady`` (0: none)."""
 
     state: int | None
     tau: float
     variance: float
     disturbance: int | None = None
     equations: tuple[int, ...] = ()
+    steady: float = 0.0
+    level: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.equations and self.state is not None:
@@ -287,7 +296,8 @@ def _environment_prior(model: VehicleModel, x: FloatArray, u: FloatArray,
     reaches = np.abs(D).max(axis=0) > 0  # (rows, channels)
     tau = BROAD_TAU * len(x) * dt
     out = [Forcing(None, tau, BROAD**2 * float(np.var(v)), c,
-                   tuple(rows[i] for i in np.flatnonzero(reaches[:, j])))
+                   tuple(rows[i] for i in np.flatnonzero(reaches[:, j])),
+                   STEADY**2 * float(np.var(v)))
            for j, (c, v) in enumerate(zip(channels, values.T, strict=True))]
     return out, np.einsum("trc,tc->tr", D, values)
 
@@ -304,11 +314,19 @@ def environment_statistics(model: VehicleModel, dt: float, channels: tuple[str, 
     thrust that holds against it is a function of the input, which their fit removes."""
     own = [f for f in forcing if f.disturbance is None]
     environment = [f for f in forcing if f.disturbance is not None]
+    start = len(model.state_names) + len(own)
     z = _filter(model, dt, channels, q, noise, x0, P0, substeps, own + environment
-                ).smooth(u, y).x[:, 0, len(model.state_names) + len(own):]
+                ).smooth(u, y).x[:, 0, start:start + len(environment)]
     return own + [replace(f, tau=_decorrelation_time(e, dt, f.tau),
                           variance=min(float(np.var(e)), f.variance))
                   for f, e in zip(environment, z.T, strict=True)]
+
+
+def _with_levels(forcing: list[Forcing], z: FloatArray) -> tuple[Forcing, ...]:
+    """``forcing`` with the smoothed steady parts (the filter's states after the forcings,
+    ``z``) as their ``level``."""
+    steady = iter(z.mean(axis=0))
+    return tuple(replace(f, level=float(next(steady))) if f.steady > 0 else f for f in forcing)
 
 
 def _decorrelation_time(series: FloatArray, dt: float, longest: float) -> float:
@@ -335,7 +353,8 @@ def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatA
             forcing: Sequence[Forcing]) -> ExtendedKalmanFilter:
     """The nominal model's filter with per-step process noise ``q`` on the states and, after
     them, the ``forcing`` states (zero mean, their stationary variance as prior): the
-    equations' own forcings, then the environment's channels."""
+    equations' own forcings, the environment's channels, then the steady parts of those that
+    have one (constants)."""
     if not forcing:
         return ExtendedKalmanFilter.from_model(model, dt, measured=channels, Q=np.diag(q),
                                                R=np.diag(noise**2), x0=x0, P0=P0,
@@ -346,29 +365,35 @@ def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatA
     forcing = own + environment
     rows = np.array([f.state for f in own], dtype=int)
     channels_d = np.array([f.disturbance for f in environment], dtype=int)
+    steady = [f for f in environment if f.steady > 0]
+    channels_s = np.array([f.disturbance for f in steady], dtype=int)
     tau = np.array([f.tau for f in forcing])
     variance = np.array([f.variance for f in forcing])
     outputs = [model.output_names.index(c) for c in channels]
-    n_d = len(model.disturbance_names)
+    n_d, n_f = len(model.disturbance_names), n + len(forcing)
 
     def f(z: FloatArray, u: FloatArray, _theta: FloatArray) -> FloatArray:
         d = np.zeros((len(z), n_d))
-        d[:, channels_d] = z[:, n + len(rows):]
+        d[:, channels_d] = z[:, n + len(rows):n_f]
+        d[:, channels_s] += z[:, n_f:]
         x_dot = model.rhs(z[:, :n], u, d)
         x_dot[:, rows] += z[:, n:n + len(rows)]
-        return np.concatenate([x_dot, -z[:, n:] / tau], axis=1)
+        return np.concatenate([x_dot, -z[:, n:n_f] / tau, np.zeros((len(z), len(steady)))],
+                              axis=1)
 
     def h(z: FloatArray) -> FloatArray:
         return model.output(z[:, :n])[:, outputs]
 
     decay = np.exp(-2 * dt / tau)
-    Q = np.diag(np.concatenate([q, variance * (1 - decay)]))
+    Q = np.diag(np.concatenate([q, variance * (1 - decay), np.zeros(len(steady))]))
     names = ([f"forcing_{model.state_names[i]}" for i in rows]
-             + [model.disturbance_names[c] for c in channels_d])
+             + [model.disturbance_names[c] for c in channels_d]
+             + [f"steady_{model.disturbance_names[c]}" for c in channels_s])
+    prior = np.concatenate([variance, [f.steady for f in steady]])
     return ExtendedKalmanFilter(f, h, dt=dt, Q=Q, R=np.diag(noise**2), n_inputs=len(
         model.input_names), state_names=(*model.state_names, *names), measurement_names=channels,
-        x0=np.concatenate([x0, np.zeros(len(forcing))]),
-        P0=linalg.block_diag(P0, np.diag(variance)), substeps=substeps)
+        x0=np.concatenate([x0, np.zeros(len(prior))]),
+        P0=linalg.block_diag(P0, np.diag(prior)), substeps=substeps)
 
 
 def _initial_state(model: VehicleModel, y: FloatArray, channels: tuple[str, ...],

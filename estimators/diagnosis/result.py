@@ -72,8 +72,9 @@ class Diagnosis:
     def to_dict(self) -> dict[str, Any]:
         """The JSON document (see the issue's schema), with plain Python numbers; also
         ``unconfirmed`` findings, the ``calibration`` and the ``noise_model`` (the coloured
-        forcing: each environment channel the filter estimated, std in its units, and each
-        force equation's own, std in state units per s; correlation times, s)."""
+        forcing: each environment channel the filter estimated, its steady part and std in
+        its units, and each force equation's own, std in state units per s; correlation
+        times, s)."""
         out = {"model": self.model, "mismatch": self.mismatch, "channels": self.channels,
                "windows": self.windows, "band": self.band,
                "findings": [_finding_dict(f) for f in self.findings], "fit": self.fit}
@@ -148,7 +149,8 @@ def _forcing_dict(f: Forcing, model: Any) -> dict[str, Any]:
     if f.disturbance is None:
         return {"equation": model.state_names[f.state], "correlation_time": tau, "std": std}
     return {"disturbance": model.disturbance_names[f.disturbance],
-            "unit": model.disturbance_units[f.disturbance], "correlation_time": tau, "std": std,
+            "unit": model.disturbance_units[f.disturbance], "steady": f.level,
+            "correlation_time": tau, "std": std,
             "equations": [model.state_names[i] for i in f.equations]}
 
 
