@@ -207,8 +207,7 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
             forcing = forcing_model(model, x, u, error, measured, dt)
             forced = sorted({i for f in forcing for i in f.equations})
             q[forced] *= WHITE_SHARE
-            for _ in range(ENVIRONMENT_PASSES if any(f.disturbance is not None
-                                                     for f in forcing) else 0):
+            for _ in range(ENVIRONMENT_PASSES if _split(forcing)[1] else 0):
                 forcing = environment_statistics(model, dt, channels, q, noise, x0, P0,
                                                  substeps, forcing, u, y)
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
@@ -312,14 +311,19 @@ def environment_statistics(model: VehicleModel, dt: float, channels: tuple[str, 
     :func:`forcing_model`: a smoother free to move the environment would take a missing term
     for it). The equation errors alone cannot show a slow current or wind: under control the
     thrust that holds against it is a function of the input, which their fit removes."""
-    own = [f for f in forcing if f.disturbance is None]
-    environment = [f for f in forcing if f.disturbance is not None]
+    own, environment = _split(forcing)
     start = len(model.state_names) + len(own)
     z = _filter(model, dt, channels, q, noise, x0, P0, substeps, own + environment
                 ).smooth(u, y).x[:, 0, start:start + len(environment)]
     return own + [replace(f, tau=_decorrelation_time(e, dt, f.tau),
                           variance=min(float(np.var(e)), f.variance))
                   for f, e in zip(environment, z.T, strict=True)]
+
+
+def _split(forcing: Sequence[Forcing]) -> tuple[list[Forcing], list[Forcing]]:
+    """The equations' own forcings and the environment's channels, in the filter's order."""
+    return ([f for f in forcing if f.disturbance is None],
+            [f for f in forcing if f.disturbance is not None])
 
 
 def _with_levels(forcing: list[Forcing], z: FloatArray) -> tuple[Forcing, ...]:
@@ -360,8 +364,7 @@ def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatA
                                                R=np.diag(noise**2), x0=x0, P0=P0,
                                                substeps=substeps)
     n = len(model.state_names)
-    own = [f for f in forcing if f.disturbance is None]
-    environment = [f for f in forcing if f.disturbance is not None]
+    own, environment = _split(forcing)
     forcing = own + environment
     rows = np.array([f.state for f in own], dtype=int)
     channels_d = np.array([f.disturbance for f in environment], dtype=int)
