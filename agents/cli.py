@@ -109,12 +109,16 @@ def _simulate(args: argparse.Namespace) -> int:
     env_kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
     options = {k: v for k, v in (("amplitude", args.amplitude), ("period", args.period),
                                  ("hold", args.hold)) if v is not None}
+    disturbances = [n.strip() for n in args.disturbances.split(",") if n.strip()]
     recording = simulate(args.env, args.steps, seed=args.seed, policy=args.policy,
-                         env_kwargs=env_kwargs, progress=not args.quiet, **options)
+                         env_kwargs=env_kwargs, progress=not args.quiet,
+                         disturbances=disturbances, **options)
     path = write_recording(recording, args.out)
     print(f"wrote {len(recording.time)} samples ({recording.time[-1]:.1f} s) of model "
           f"{recording.model!r}: inputs {', '.join(recording.input_names)}; channels "
-          f"{', '.join(recording.measured_names)} -> {path}")
+          f"{', '.join(recording.measured_names)}"
+          + (f"; disturbances {', '.join(recording.disturbance_names)}"
+             if recording.disturbance_names else "") + f" -> {path}")
     return 0
 
 
@@ -294,6 +298,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--hold", type=float, help="random/prbs hold time, s (5; lqr's dither 2)")
     sim.add_argument("--env-kwargs", metavar="JSON",
                      help='environment arguments, SI units, e.g. \'{"hs": 3.0, "tp": 9}\'')
+    sim.add_argument("--disturbances", default="", metavar="NAMES",
+                     help="comma-separated disturbance channels to record too (the model's "
+                          "names, e.g. the ROV's morph command s_cmd or the hovercraft's "
+                          "wind_north,wind_east): a diagnosis then takes them as known inputs")
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
     sim.set_defaults(run=_simulate)
 

@@ -30,8 +30,9 @@ class Episode:
     """One episode, row k holding what was seen and done at time ``time[k]``.
 
     ``observations[k]`` is what the policy saw before choosing ``actions[k]``; ``states[k]`` the
-    true state then; ``inputs[k]`` the physical input applied from ``time[k]`` for one step;
-    ``rewards[k]`` the reward of that step.
+    true state then; ``inputs[k]`` the physical input applied from ``time[k]`` for one step,
+    ``disturbances[k]`` the disturbance (sea, wind, current, command) over it; ``rewards[k]``
+    the reward of that step.
     """
 
     time: NDArray[np.float64]
@@ -39,6 +40,7 @@ class Episode:
     states: NDArray[np.float64]
     actions: NDArray[np.float64]
     inputs: NDArray[np.float64]
+    disturbances: NDArray[np.float64]
     rewards: NDArray[np.float64]
     clipped: NDArray[np.bool_]
     terminated: bool
@@ -56,7 +58,7 @@ def run_episode(env: Any, policy: Any, steps: int, seed: int | None = None,
     """
     obs, info = env.reset(seed=seed)
     rows: dict[str, list] = {k: [] for k in ("time", "observations", "states", "actions",
-                                             "inputs", "rewards", "clipped")}
+                                             "inputs", "disturbances", "rewards", "clipped")}
     terminated = False
     iterator = range(steps)
     if progress:
@@ -72,6 +74,7 @@ def run_episode(env: Any, policy: Any, steps: int, seed: int | None = None,
         obs, reward, terminated, truncated, info = env.step(action)
         rows["actions"].append(action)
         rows["inputs"].append(info["action_applied"])
+        rows["disturbances"].append(info["disturbance"])
         rows["rewards"].append(reward)
         rows["clipped"].append(info["action_clipped"])
         if terminated or truncated:

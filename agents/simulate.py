@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -51,12 +51,22 @@ def make_policy(name: str, env: Any, seed: int | None, **options: float) -> Any:
 
 def simulate(env_id: str, steps: int, seed: int | None = None, policy: str = "prbs",
              env_kwargs: Mapping[str, Any] | None = None, progress: bool = False,
-             **policy_options: float) -> Recording:
+             disturbances: Sequence[str] = (), **policy_options: float) -> Recording:
     """Record ``steps`` steps of ``env_id`` under ``policy``: the applied inputs and the sensor
-    outputs, in SI units, with the model name, its parameters and the settings as metadata."""
+    outputs, in SI units, with the model name, its parameters and the settings as metadata.
+
+    :param disturbances: the model's disturbance channels to record too, exact (a logged
+        command such as the ROV's morph ``s_cmd``, or an ideal wind or current sensor).
+    :raises ValueError: ``steps < 2`` or an unknown disturbance name, before any simulation.
+    """
     if steps < 2:
         raise ValueError(f"steps={steps!r} is invalid: a recording needs at least 2 steps")
     env = gym.make(env_id, max_episode_steps=steps, **dict(env_kwargs or {}))
+    names = env.unwrapped.sim.model.disturbance_names
+    unknown = sorted(set(disturbances) - set(names))
+    if unknown:
+        raise ValueError(f"unknown disturbance(s) {unknown} of {env_id}: choose from "
+                         f"{', '.join(names) or 'none'}")
     episode = run_episode(env, make_policy(policy, env, seed, **policy_options), steps,
                           seed=seed, progress=progress)
     sim = env.unwrapped.sim
@@ -66,5 +76,6 @@ def simulate(env_id: str, steps: int, seed: int | None = None, policy: str = "pr
     meta = {"env": env_id, "seed": seed, "policy": policy,
             "policy_options": dict(policy_options), "dt": sim.dt,
             "env_kwargs": dict(env_kwargs or {}), "terminated": episode.terminated}
+    recorded = {name: episode.disturbances[:, names.index(name)] for name in disturbances}
     return Recording.from_arrays(sim.model.name, episode.time, episode.inputs, measurements,
-                                 params=params, meta=meta)
+                                 params=params, meta=meta, disturbances=recorded)

@@ -7,7 +7,10 @@ the effect sized by :func:`estimators.diagnosis.typical_effect` at strength 0.3)
 of a closed-loop identification experiment (``agents.simulate``, policy ``lqr`` with a
 random-step dither on every input of the share of its half range that the diagnosis's own
 generator uses; ``--dither 0``: the autopilot alone) and diagnoses the record against the
-nominal model with the default settings. It is scored as the
+nominal model with the default settings. A command that is not an actuator's (the ROV's morph
+command ``s_cmd``: the environment morphs the ROV at mid-record) is recorded as a disturbance
+column, as a trial's log would have it; ``--instrumented`` records the wind (hovercraft) and
+the current (ROV) as well, as an anemometer or a current profiler would. It is scored as the
 acceptance set is (``estimators.diagnosis.cases.score``): the effect and target ranked first,
 its key parameter within 30 %, and no confident finding on an effect-free record. Nothing in
 the diagnosis was tuned on these cases; seeds 0 and 1 were looked at while it was built
@@ -17,7 +20,7 @@ Only state effects and sensor biases: the environment records the inputs its act
 so an actuator effect is inside the recorded input and no diagnosis could see it.
 
     python benchmarks/env_recordings.py [--vehicles usv,rov] [--seeds 0,1] [--dither 0]
-                                        [--json out.json]
+                                        [--instrumented] [--json out.json]
 """
 
 from __future__ import annotations
@@ -53,11 +56,13 @@ VEHICLES: dict[str, tuple[str, list[tuple[str, str, dict[str, str]]]]] = {
                                                  ("linear_damping", "v", {}),
                                                  ("sensor_bias", "psi", {})]),
 }
-#: Environment settings beyond the defaults. The ROV's morph command is a disturbance channel
-#: of its model that the recording format cannot carry (it records inputs and sensors only):
-#: with a morph no model follows the record ("the model does not describe this recording" on
-#: all ten records of seeds 0 and 1), so its cases keep the cruise shape.
-ENV_KWARGS: dict[str, dict[str, object]] = {"rov": {"morph_time": None, "morph_window": None}}
+#: Disturbance channels every record carries: commands, known to whoever ran the trial (without
+#: the ROV's morph command no model follows its record: "the model does not describe this
+#: recording" on all four effect records of seed 0).
+COMMANDS: dict[str, tuple[str, ...]] = {"rov": ("s_cmd",)}
+#: Environment channels a sensor measures, recorded with ``--instrumented``.
+INSTRUMENTS: dict[str, tuple[str, ...]] = {"hovercraft": ("wind_north", "wind_east"),
+                                           "rov": ("current_n", "current_e", "current_d")}
 DURATION = 300.0
 
 
@@ -74,16 +79,18 @@ def cases(vehicles: Sequence[str], seeds: Sequence[int]) -> list[tuple[str, Case
     return out
 
 
-def run(env_id: str, case: Case, dither: float | None = None):
+def run(env_id: str, case: Case, dither: float | None = None, instrumented: bool = False):
     """Record the case in its environment (``dither``: share of each input's half range, None
-    for the generator's) and diagnose it."""
+    for the generator's; ``instrumented``: with its wind or current) and diagnose it."""
     probe = simulate(env_id, 2, seed=case.seed, policy="lqr")
     steps = int(DURATION / float(probe.meta["dt"]))
     effects: list[Effect] = list(case.effects)
     share = DITHER_SHARE.get(case.model, DEFAULT_DITHER_SHARE) if dither is None else dither
-    env_kwargs = {**ENV_KWARGS.get(case.model, {}), **({"effects": effects} if effects else {})}
-    recording = simulate(env_id, steps, seed=case.seed, policy="lqr", env_kwargs=env_kwargs,
-                         **({"amplitude": share} if share > 0 else {}))
+    recorded = COMMANDS.get(case.model, ()) + (INSTRUMENTS.get(case.model, ()) if instrumented
+                                               else ())
+    recording = simulate(env_id, steps, seed=case.seed, policy="lqr",
+                         env_kwargs={"effects": effects} if effects else {},
+                         disturbances=recorded, **({"amplitude": share} if share > 0 else {}))
     return run_case(case, recording)
 
 
@@ -97,6 +104,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="dither on every input, share of its half range (default: the "
                              "diagnosis generator's, 0.15; the hydrofoil 0.04); 0: the "
                              "autopilot alone")
+    parser.add_argument("--instrumented", action="store_true",
+                        help="record the wind (hovercraft) and the current (ROV) too")
     parser.add_argument("--json", metavar="OUT", help="write every outcome as JSON")
     args = parser.parse_args(argv)
     vehicles = [v.strip() for v in args.vehicles.split(",") if v.strip()]
@@ -105,8 +114,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"unknown vehicle(s) {unknown}; choose from {', '.join(VEHICLES)}")
     seeds = [int(s) for s in args.seeds.split(",")]
     start = time.perf_counter()
-    outcomes = [run(env_id, case, args.dither) for env_id, case in tqdm(cases(vehicles, seeds),
-                                                           desc="diagnosing", unit="case")]
+    outcomes = [run(env_id, case, args.dither, args.instrumented)
+                for env_id, case in tqdm(cases(vehicles, seeds), desc="diagnosing", unit="case")]
     print("| case | found (confidence) | improvement | right | key parameter | s |")
     print("| --- | --- | ---: | --- | --- | ---: |")
     for o in outcomes:

@@ -14,6 +14,11 @@ Columns
         Named as in the model's ``output_names`` (its states, plus derived outputs such as the DP
         vessel's measured position; for ``usv``: ``v, r, psi, p, phi``). Channels that
         were not measured are simply absent, but at least one must be present.
+    optional: measured disturbances
+        Named as in the model's ``disturbance_names`` (the hovercraft's ``wind_north``, the
+        ROV's ``current_n`` or morph command ``s_cmd``): a wind, current or command that was
+        logged. A diagnosis takes them as known inputs
+        (:class:`~marine_envs.models.MeasuredDisturbances`) instead of estimating them.
 
     No other columns are allowed, every value must be a finite number and there must be at least
     two rows.
@@ -133,6 +138,7 @@ class Recording:
         params: Mapping[str, float] | None = None,
         meta: Mapping[str, Any] | None = None,
         *,
+        disturbances: Mapping[str, ArrayLike] | None = None,
         require_uniform: bool = True,
     ) -> Recording:
         """Build and validate a recording from arrays in SI units.
@@ -144,6 +150,8 @@ class Recording:
         :param measurements: measured channels by state name, each shape ``(n,)``, SI units.
         :param params: parameter overrides by docs/models.md symbol.
         :param meta: free-form extra metadata.
+        :param disturbances: measured disturbances by the model's disturbance names, each
+            shape ``(n,)``, SI units.
         :param require_uniform: reject a non-uniform time step.
         """
         vehicle = _vehicle(model, params or {})
@@ -159,7 +167,12 @@ class Recording:
             raise ValueError(f"unknown measured channel(s) {unknown} for model {model!r}; "
                              f"allowed: {', '.join(vehicle.output_names)}")
         columns = {TIME: time, **dict(zip(vehicle.input_names, inputs.T, strict=True))}
-        columns.update({name: np.asarray(values) for name, values in measurements.items()})
+        unknown = [name for name in disturbances or {} if name not in vehicle.disturbance_names]
+        if unknown:
+            raise ValueError(f"unknown disturbance(s) {unknown} for model {model!r}; allowed: "
+                             f"{', '.join(vehicle.disturbance_names)}")
+        for given in (disturbances or {}, measurements):
+            columns.update({name: np.asarray(values) for name, values in given.items()})
         for name, values in columns.items():
             if values.shape != (len(time),):
                 raise ValueError(f"column {name!r} must have shape ({len(time)},) like time; "
@@ -202,6 +215,11 @@ class Recording:
         return get_model(self.model).input_names
 
     @property
+    def disturbance_names(self) -> tuple[str, ...]:
+        """Measured disturbance columns present in the recording, in model order."""
+        return tuple(n for n in get_model(self.model).disturbance_names if n in self.data.columns)
+
+    @property
     def measured_names(self) -> tuple[str, ...]:
         """Measured channels present in the recording, in model (state) order."""
         return tuple(n for n in get_model(self.model).output_names if n in self.data.columns)
@@ -211,6 +229,12 @@ class Recording:
         """Inputs in SI units, shape ``(n, len(input_names))``."""
         return self.data[list(self.input_names)].to_numpy(dtype=float)
 
+    def inputs_for(self, model: VehicleModel) -> np.ndarray:
+        """The columns ``model`` takes as inputs, SI units, shape ``(n, len(model.input_names))``:
+        its actuators, and the recorded disturbances of a
+        :class:`~marine_envs.models.MeasuredDisturbances`."""
+        return self.data[list(model.input_names)].to_numpy(dtype=float)
+
     @property
     def measurements(self) -> np.ndarray:
         """Measured channels in SI units, shape ``(n, len(measured_names))``."""
@@ -218,7 +242,8 @@ class Recording:
 
     @property
     def units(self) -> dict[str, str]:
-        """SI unit of every column, in column order (time, inputs, measured channels)."""
+        """SI unit of every column, in column order (time, inputs, measured disturbances,
+        measured channels)."""
         vehicle = get_model(self.model)
         si = _si_units(vehicle)
         return {name: si[name] for name in _canonical(self.data, vehicle)}
@@ -433,7 +458,7 @@ def _check_meta(meta: Any) -> None:
 
 def _check_columns(data: pd.DataFrame, vehicle: VehicleModel) -> None:
     columns = list(data.columns)
-    allowed = (TIME, *vehicle.input_names, *vehicle.output_names)
+    allowed = (TIME, *vehicle.input_names, *vehicle.output_names, *vehicle.disturbance_names)
     duplicated = sorted({str(c) for c in data.columns[data.columns.duplicated()]})
     if duplicated:
         raise ValueError(f"duplicate column(s) {duplicated}")
@@ -453,10 +478,12 @@ def _check_columns(data: pd.DataFrame, vehicle: VehicleModel) -> None:
 
 
 def _canonical(data: pd.DataFrame, vehicle: VehicleModel) -> list[str]:
-    """Column order of the format: time, inputs, measured channels in model order."""
+    """Column order of the format: time, inputs, measured disturbances and measured channels
+    in model order."""
     present = set(data.columns)
+    disturbances = [name for name in vehicle.disturbance_names if name in present]
     measured = [name for name in vehicle.output_names if name in present]
-    return [TIME, *vehicle.input_names, *measured]
+    return [TIME, *vehicle.input_names, *disturbances, *measured]
 
 
 def _is_numeric(column: pd.Series) -> bool:
@@ -507,6 +534,7 @@ def _check_time(time: np.ndarray, require_uniform: bool) -> None:
 def _si_units(vehicle: VehicleModel) -> dict[str, str]:
     """SI unit of every column the model allows."""
     return {TIME: "s", **dict(zip(vehicle.input_names, vehicle.input_units, strict=True)),
+            **dict(zip(vehicle.disturbance_names, vehicle.disturbance_units, strict=True)),
             **dict(zip(vehicle.output_names, vehicle.output_units, strict=True))}
 
 

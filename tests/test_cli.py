@@ -136,3 +136,18 @@ def test_lqr_with_a_dither_is_a_closed_loop_identification_experiment(tmp_path, 
     assert main(["simulate", "--policy", "lqr", "--period", "3", "--steps", "10", "--quiet",
                  "--out", str(tmp_path / "x.csv")]) == 2
     assert "amplitude and hold" in capsys.readouterr().err
+
+
+def test_simulate_records_named_disturbances(tmp_path, capsys):
+    out = tmp_path / "rov.csv"
+    assert main(["simulate", "--env", "marine_envs/ROV-v0", "--steps", "20", "--seed", "1",
+                 "--policy", "zero", "--disturbances", "s_cmd,current_n", "--quiet",
+                 "--out", str(out)]) == 0
+    assert "disturbances current_n, s_cmd" in capsys.readouterr().out
+    recording = read_recording(out)
+    assert recording.disturbance_names == ("current_n", "s_cmd")
+    assert recording.data["s_cmd"].iloc[0] == 0.0  # cruise shape at the start
+    assert np.ptp(recording.data["current_n"]) > 0  # the env's current, as it flowed
+    assert main(["simulate", "--env", "marine_envs/ROV-v0", "--steps", "20", "--quiet",
+                 "--disturbances", "wind", "--out", str(tmp_path / "x.csv")]) == 2
+    assert "unknown disturbance(s) ['wind']" in capsys.readouterr().err

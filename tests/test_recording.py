@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from marine_envs.models import get_model
+from marine_envs.models import MeasuredDisturbances, get_model
 from marine_envs.recording import METADATA_KEY, Recording, read_recording, write_recording
 
 DT = 0.1
@@ -340,3 +340,40 @@ def test_parquet_without_pyarrow_gives_install_hint(tmp_path, monkeypatch):
     # CSV does not need pyarrow.
     csv = write_recording(make_recording(), tmp_path / "run.csv")
     assert read_recording(csv).model == "usv"
+
+
+# -- measured disturbances ---------------------------------------------------------------------
+def test_a_measured_wind_is_a_column_of_its_own_in_si_units(tmp_path):
+    frame = pd.DataFrame({"time": [0.0, 0.1, 0.2], "sigma_1": 0.5, "sigma_2": 0.5, "delta": 0.0,
+                          "wind_east": [10.0, 12.0, 8.0], "u": [5.0, 5.1, 5.2]})
+    path = write_csv(tmp_path, frame, {"model": "hovercraft", "units": {"wind_east": "kn"}})
+
+    rec = read_recording(path)
+
+    assert rec.disturbance_names == ("wind_east",)
+    assert list(rec.data.columns) == ["time", "sigma_1", "sigma_2", "delta", "wind_east", "u"]
+    assert rec.units["wind_east"] == "m/s"
+    np.testing.assert_allclose(rec.data["wind_east"], np.array([10.0, 12.0, 8.0]) * 1852 / 3600)
+    assert rec.inputs.shape == (3, 3)  # the actuators only
+    model = MeasuredDisturbances(get_model("hovercraft"), rec.disturbance_names)
+    np.testing.assert_array_equal(rec.inputs_for(model)[:, 3], rec.data["wind_east"])
+    with pytest.raises(ValueError, match=r"unknown disturbance\(s\) \['gust'\]"):
+        Recording.from_arrays("hovercraft", rec.time, rec.inputs, {"u": rec.data["u"]},
+                              disturbances={"gust": rec.data["wind_east"]})
+
+
+def test_a_model_with_measured_disturbances_takes_them_as_inputs():
+    rov = get_model("rov")
+    model = MeasuredDisturbances(rov, ("s_cmd", "current_n"))
+    assert model.input_names == (*rov.input_names, "s_cmd", "current_n")
+    assert model.actuator_names == rov.input_names
+    assert model.disturbance_names == ("current_e", "current_d")
+    assert model.environment_disturbances == ("current_e", "current_d")
+    rng = np.random.default_rng(3)
+    x, u, d = rov.x0 + 0.1 * rng.normal(size=(5, 13)), rov.u0 + rng.normal(size=(5, 6)), \
+        rng.normal(size=(5, 4))
+    np.testing.assert_array_equal(model.rhs(x, np.c_[u, d[:, 3], d[:, 0]], d[:, 1:3]),
+                                  rov.rhs(x, u, d))
+    assert model.with_params(m=40.0).model.params.m == 40.0
+    with pytest.raises(ValueError, match=r"give distinct names of current_n"):
+        MeasuredDisturbances(rov, ("wind",))

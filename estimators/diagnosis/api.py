@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize, signal
 
-from marine_envs.models import VehicleModel, get_model
+from marine_envs.models import MeasuredDisturbances, VehicleModel, get_model
 from marine_envs.models.effects import Effect
 from marine_envs.recording import Recording, read_recording
 
@@ -102,7 +102,13 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
     for rec in recordings:
         if rec.model != vehicle.name:
             return Diagnosis(vehicle.name, None, _other_model(rec, vehicle))
+    vehicle = _with_measured_disturbances(vehicle, recordings)
     if method == "free" or (method == "auto" and _model_test(recordings)):
+        if isinstance(vehicle, MeasuredDisturbances):
+            raise ValueError(f"recorded disturbance column(s) "
+                             f"{list(vehicle.measured_disturbances)}: used in a record in a "
+                             "seaway (method 'innovations'); a model test is judged in free "
+                             "simulation without them: drop the columns")
         return diagnose_series(recordings, vehicle, calibrate, log=log)
     if len(recordings) > 1:
         raise ValueError("a series of recordings is judged in free simulation only: "
@@ -148,6 +154,20 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
 def _named(recording: Recording, path: str | Path) -> Recording:
     recording.meta.setdefault("name", Path(path).name)
     return recording
+
+
+def _with_measured_disturbances(vehicle: VehicleModel, recordings: Sequence[Recording]
+                                ) -> VehicleModel:
+    """``vehicle`` taking the recorded disturbance columns (a logged wind, current or command)
+    as inputs, or itself when there are none.
+
+    :raises ValueError: the recordings of a series record different disturbances."""
+    names = {rec.disturbance_names for rec in recordings}
+    if len(names) > 1:
+        raise ValueError(f"the recordings record different disturbances {sorted(names)}: a "
+                         "series needs the same columns in every recording")
+    measured = names.pop()
+    return MeasuredDisturbances(vehicle, measured) if measured else vehicle
 
 
 def _model_test(recordings: Sequence[Recording]) -> bool:

@@ -184,7 +184,7 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
     for j, name in enumerate(channels):
         if name in ANGLES:
             y[:, j] = np.unwrap(y[:, j])
-    u, dt = recording.inputs, recording.dt
+    u, dt = recording.inputs_for(model), recording.dt
     noise = white_noise_std(y)
     n = len(model.state_names)
     substeps = substeps_for(model, dt)

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from marine_envs.models import MeasuredDisturbances
 from marine_envs.models.effects import Effect
 
 from .residuals import Forcing, Residuals
@@ -87,6 +88,8 @@ class Diagnosis:
         for key in ("calibration_quality", "model_check", "unexplained", "alternatives"):
             if getattr(self, key):
                 out[key] = getattr(self, key)
+        if self.measured_disturbances:
+            out["measured_disturbances"] = list(self.measured_disturbances)
         if self.residuals is not None and self.residuals.forcing:
             out["noise_model"] = [_forcing_dict(f, self.residuals.model)
                                   for f in self.residuals.forcing]
@@ -97,6 +100,13 @@ class Diagnosis:
         if path is not None:
             Path(path).write_text(text + "\n")
         return text
+
+    @property
+    def measured_disturbances(self) -> tuple[str, ...]:
+        """The recorded disturbances the model took as inputs (a logged wind, current or
+        command)."""
+        model = getattr(self.residuals, "model", None)
+        return model.measured_disturbances if isinstance(model, MeasuredDisturbances) else ()
 
     def summary(self) -> str:
         """A few lines for a terminal."""
@@ -112,6 +122,9 @@ class Diagnosis:
         lines += [f"  refitted with the findings, {n} is {q['status']}"
                   for n, q in self.calibration_quality.get("with_findings", {}).items()
                   if q["status"] != "identified"]
+        if self.measured_disturbances:
+            lines.append("  recorded disturbances taken as known inputs: "
+                         + ", ".join(self.measured_disturbances))
         if not self.mismatch:
             return "\n".join([f"{self.model}: no significant mismatch: the nominal model "
                               "explains the record", *lines, *withdrawn])

@@ -68,7 +68,7 @@ def synthesize(model: str | VehicleModel, effects: Sequence[Effect] = (), *,
                duration: float = 300.0, dt: float = 0.1, noise: float = 0.05, seed: int = 0,
                measured: Sequence[str] | None = None, params: Mapping[str, float] | None = None,
                sea: float = 1.0, dither: float = 1.0, reference: float = 1.0,
-               substeps: int = 4) -> Recording:
+               substeps: int = 4, disturbances: Sequence[str] = ()) -> Recording:
     """A closed-loop recording of ``model`` with ``effects`` added.
 
     :param model: model name or object (its parameters are the truth's, before the effects).
@@ -81,6 +81,8 @@ def synthesize(model: str | VehicleModel, effects: Sequence[Effect] = (), *,
     :param params: parameter overrides of the nominal model.
     :param sea, dither, reference: scale the sea, the input dither and the reference steps.
     :param substeps: RK4 steps per sample.
+    :param disturbances: disturbance channels recorded too (a wind or current sensor: the sea
+        held over each sample, with the channels' relative sensor noise).
     :raises FloatingPointError: the closed loop loses the vehicle (a speed or rate beyond
         :data:`LOST`, or not finite): the effects are too strong for the autopilot.
     """
@@ -89,22 +91,29 @@ def synthesize(model: str | VehicleModel, effects: Sequence[Effect] = (), *,
     truth = EffectModel(vehicle, effects)
     channels = tuple(measured or getattr(vehicle, "measured_names", vehicle.state_names))
     _check(vehicle, channels, duration, dt, noise)
+    unknown = sorted(set(disturbances) - set(vehicle.disturbance_names))
+    if unknown:
+        raise ValueError(f"unknown disturbance(s) {unknown} for model {vehicle.name!r}; "
+                         f"choose from {', '.join(vehicle.disturbance_names)}")
     rng = np.random.default_rng(seed)
     steps = int(round(duration / dt)) + 1
     time = np.arange(steps) * dt
     x_ref = _references(vehicle, steps, dt, reference, rng)
-    commanded, states = _closed_loop(truth, x_ref, dt, sea, dither, substeps, rng, steps)
+    commanded, states, d = _closed_loop(truth, x_ref, dt, sea, dither, substeps, rng, steps)
     outputs = vehicle.output(states) if vehicle.output_names != vehicle.state_names else states
     outputs = outputs[:, [vehicle.output_names.index(c) for c in channels]]
     spread = np.std(outputs, axis=0)
     measured_values = truth.measure(outputs, channels) \
         + noise * spread * rng.standard_normal(outputs.shape)
+    d = d[:, [vehicle.disturbance_names.index(c) for c in disturbances]]
+    d = d + noise * np.std(d, axis=0) * rng.standard_normal(d.shape)
     meta = {"generator": "estimators.diagnosis.synthetic", "seed": seed, "noise": noise, "dt": dt,
             "effects": [e.to_dict() for e in effects], "sea": sea, "dither": dither,
             "true_state": False}
     return Recording.from_arrays(vehicle.name, time, commanded,
                                  dict(zip(channels, measured_values.T, strict=True)),
-                                 params=dict(params or {}), meta=meta)
+                                 params=dict(params or {}), meta=meta,
+                                 disturbances=dict(zip(disturbances, d.T, strict=True)))
 
 
 def typical_effect(model: str, effect: str, target: str, *, strength: float = 0.3,
@@ -246,8 +255,8 @@ def _sea(vehicle: VehicleModel, steps: int, dt: float, scale: float,
 
 def _closed_loop(truth: EffectModel, x_ref: np.ndarray, dt: float, sea: float, dither: float,
                  substeps: int, rng: np.random.Generator,
-                 steps: int) -> tuple[np.ndarray, np.ndarray]:
-    """Commanded inputs and true states ``(steps, n)`` of the closed loop."""
+                 steps: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Commanded inputs, true states and the sea ``(steps, n)`` of the closed loop."""
     vehicle = truth.model
     K = _gain(vehicle, dt)
     low, high = vehicle.u_bounds
@@ -278,7 +287,7 @@ def _closed_loop(truth: EffectModel, x_ref: np.ndarray, dt: float, sea: float, d
                                      f"t={(k + 1) * dt:.1f} s ({vehicle.state_names[i]} = "
                                      f"{x[i]:.3g}); the effects are too strong for the "
                                      "controller")
-    return commanded, states
+    return commanded, states, d
 
 
 def _rates(vehicle: VehicleModel) -> np.ndarray:

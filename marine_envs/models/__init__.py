@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import importlib
 
-from .base import VehicleModel
+from .base import MeasuredDisturbances, VehicleModel
 from .linear import zoh
 from .usv import USVModel, USVParams
 
@@ -47,4 +47,5 @@ def get_model(name: str, **params: float) -> VehicleModel:
     return model.with_params(**params) if params else model
 
 
-__all__ = ["VehicleModel", "USVModel", "USVParams", "get_model", "model_names", "zoh"]
+__all__ = ["MeasuredDisturbances", "VehicleModel", "USVModel", "USVParams", "get_model",
+           "model_names", "zoh"]

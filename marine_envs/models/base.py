@@ -11,7 +11,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 from abc import ABC, abstractmethod
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -54,6 +54,12 @@ class VehicleModel(ABC):
     #: motion), driven by unit-intensity white disturbances: the model states their statistics,
     #: so a diagnosis takes their process noise from the model and looks for no term in them.
     noise_model_states: ClassVar[tuple[str, ...]] = ()
+
+    @property
+    def actuator_names(self) -> tuple[str, ...]:
+        """The inputs a controller commands: every input, unless the model takes measured
+        disturbances as inputs too (:class:`MeasuredDisturbances`)."""
+        return self.input_names
 
     @property
     def environment_disturbances(self) -> tuple[str, ...]:
@@ -308,6 +314,94 @@ class LinearizedModel(VehicleModel):
 
     def __repr__(self) -> str:
         return f"LinearizedModel({self.nonlinear!r})"
+
+
+class MeasuredDisturbances(VehicleModel):
+    """A model whose named disturbance channels were measured (an anemometer's wind, an ADCP's
+    current, a logged morph command): they become inputs after the model's own, so an estimator
+    or a diagnosis takes them from the recording instead of estimating them. Same name, states,
+    outputs and parameters as the model; the other disturbance channels stay disturbances.
+
+    :param model: the model.
+    :param names: its measured disturbance channels (names in ``model.disturbance_names``).
+    :raises ValueError: an unknown, repeated or missing name.
+    """
+
+    def __init__(self, model: VehicleModel, names: Sequence[str]) -> None:
+        names = tuple(names)
+        unknown = sorted(set(names) - set(model.disturbance_names))
+        if unknown or not names or len(set(names)) < len(names):
+            raise ValueError(f"measured disturbances {list(names)} for model {model.name!r}: "
+                             f"give distinct names of {', '.join(model.disturbance_names)}")
+        super().__init__(model.params)
+        self.model, self.measured_disturbances = model, names
+        for attr in ("name", "state_names", "state_units", "is_linear", "affine_parameters",
+                     "row_parameters", "noise_model_states"):
+            setattr(self, attr, getattr(model, attr))
+        units = dict(zip(model.disturbance_names, model.disturbance_units, strict=True))
+        self._measured = [model.disturbance_names.index(n) for n in names]
+        self._rest = [i for i in range(len(units)) if i not in self._measured]
+        self.input_names = model.input_names + names
+        self.input_units = model.input_units + tuple(units[n] for n in names)
+        self.disturbance_names = tuple(model.disturbance_names[i] for i in self._rest)
+        self.disturbance_units = tuple(model.disturbance_units[i] for i in self._rest)
+
+    @property
+    def actuator_names(self) -> tuple[str, ...]:
+        return self.model.actuator_names
+
+    @property
+    def environment_disturbances(self) -> tuple[str, ...]:
+        return tuple(n for n in self.model.environment_disturbances
+                     if n not in self.measured_disturbances)
+
+    @property
+    def x0(self) -> FloatArray:
+        return self.model.x0
+
+    @property
+    def u0(self) -> FloatArray:
+        """The model's nominal input, and no disturbance."""
+        return np.concatenate([self.model.u0, np.zeros(len(self.measured_disturbances))])
+
+    @property
+    def u_bounds(self) -> tuple[FloatArray, FloatArray]:
+        """The model's input limits; a measured disturbance is unbounded."""
+        free = np.full(len(self.measured_disturbances), np.inf)
+        low, high = self.model.u_bounds
+        return np.concatenate([low, -free]), np.concatenate([high, free])
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return self.model.output_names
+
+    @property
+    def output_units(self) -> tuple[str, ...]:
+        return self.model.output_units
+
+    def output(self, x: FloatArray) -> FloatArray:
+        return self.model.output(x)
+
+    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
+        """The model's ``rhs`` with ``u = [inputs, measured disturbances]`` and ``d`` the
+        others."""
+        x, u, d = self._split(x, u, d)
+        n = len(self.model.input_names)
+        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], d.shape[:-1])
+        full = np.zeros((*shape, len(self.model.disturbance_names)))
+        full[..., self._measured] = u[..., n:]
+        full[..., self._rest] = d
+        return self.model.rhs(x, u[..., :n], full)
+
+    def with_params(self, **changes: float) -> MeasuredDisturbances:
+        return MeasuredDisturbances(self.model.with_params(**changes),
+                                    self.measured_disturbances)
+
+    def with_rows(self, **values: ArrayLike) -> MeasuredDisturbances:
+        return MeasuredDisturbances(self.model.with_rows(**values), self.measured_disturbances)
+
+    def __repr__(self) -> str:
+        return f"MeasuredDisturbances({self.model!r}, {list(self.measured_disturbances)})"
 
 
 def _replace_arg(args: tuple, i: int, value: FloatArray) -> tuple:
