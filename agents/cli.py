@@ -37,7 +37,9 @@ innovations otherwise):
                 state; its multi-step prediction errors locate the mismatch (channels, time
                 windows, frequency band); every catalogue term is fitted to what the model
                 cannot explain and kept only if it improves the predictions of the held-out
-                last 30 % of the record significantly.
+                last 30 % of the record significantly. Disturbance columns in the record (a
+                logged wind, current or command: 'marine simulate --disturbances') are taken
+                as known inputs; the filter estimates only the others.
 
 catalogue (what a model may leave out):
   state terms   current, linear_damping, quadratic_damping, nonlinear_damping, coupling,
