@@ -10,7 +10,8 @@ generator uses; ``--dither 0``: the autopilot alone) and diagnoses the record ag
 nominal model with the default settings. A command that is not an actuator's (the ROV's morph
 command ``s_cmd``: the environment morphs the ROV at mid-record) is recorded as a disturbance
 column, as a trial's log would have it; ``--instrumented`` records the wind (hovercraft) and
-the current (ROV) as well, as an anemometer or a current profiler would. It is scored as the
+the current (ROV) as well, with the white noise of an anemometer (0.3 m/s) or a current
+profiler (0.02 m/s); ``--instrumented --ideal`` exactly. It is scored as the
 acceptance set is (``estimators.diagnosis.cases.score``): the effect and target ranked first,
 its key parameter within 30 %, and no confident finding on an effect-free record. Nothing in
 the diagnosis was tuned on these cases; seeds 0 and 1 were looked at while it was built
@@ -20,7 +21,7 @@ Only state effects and sensor biases: the environment records the inputs its act
 so an actuator effect is inside the recorded input and no diagnosis could see it.
 
     python benchmarks/env_recordings.py [--vehicles usv,rov] [--seeds 0,1] [--dither 0]
-                                        [--instrumented] [--json out.json]
+                                        [--instrumented [--ideal]] [--json out.json]
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict
 
+import numpy as np
 from tqdm import tqdm
 
 from agents.simulate import simulate
@@ -60,9 +62,11 @@ VEHICLES: dict[str, tuple[str, list[tuple[str, str, dict[str, str]]]]] = {
 #: the ROV's morph command no model follows its record: "the model does not describe this
 #: recording" on all four effect records of seed 0).
 COMMANDS: dict[str, tuple[str, ...]] = {"rov": ("s_cmd",)}
-#: Environment channels a sensor measures, recorded with ``--instrumented``.
-INSTRUMENTS: dict[str, tuple[str, ...]] = {"hovercraft": ("wind_north", "wind_east"),
-                                           "rov": ("current_n", "current_e", "current_d")}
+#: Environment channels a sensor measures, recorded with ``--instrumented``, and the standard
+#: deviation of its white noise (channel units): a sonic anemometer, a current profiler.
+INSTRUMENTS: dict[str, dict[str, float]] = {
+    "hovercraft": {"wind_north": 0.3, "wind_east": 0.3},
+    "rov": {"current_n": 0.02, "current_e": 0.02, "current_d": 0.02}}
 DURATION = 300.0
 
 
@@ -79,18 +83,23 @@ def cases(vehicles: Sequence[str], seeds: Sequence[int]) -> list[tuple[str, Case
     return out
 
 
-def run(env_id: str, case: Case, dither: float | None = None, instrumented: bool = False):
+def run(env_id: str, case: Case, dither: float | None = None, instrumented: bool = False,
+        ideal: bool = False):
     """Record the case in its environment (``dither``: share of each input's half range, None
-    for the generator's; ``instrumented``: with its wind or current) and diagnose it."""
+    for the generator's; ``instrumented``: with its wind or current, measured with the
+    instruments' noise unless ``ideal``) and diagnose it."""
     probe = simulate(env_id, 2, seed=case.seed, policy="lqr")
     steps = int(DURATION / float(probe.meta["dt"]))
     effects: list[Effect] = list(case.effects)
     share = DITHER_SHARE.get(case.model, DEFAULT_DITHER_SHARE) if dither is None else dither
-    recorded = COMMANDS.get(case.model, ()) + (INSTRUMENTS.get(case.model, ()) if instrumented
-                                               else ())
+    noise = INSTRUMENTS.get(case.model, {}) if instrumented else {}
     recording = simulate(env_id, steps, seed=case.seed, policy="lqr",
                          env_kwargs={"effects": effects} if effects else {},
-                         disturbances=recorded, **({"amplitude": share} if share > 0 else {}))
+                         disturbances=COMMANDS.get(case.model, ()) + tuple(noise),
+                         **({"amplitude": share} if share > 0 else {}))
+    rng = np.random.default_rng(case.seed)
+    for name, std in noise.items():
+        recording.data[name] += 0.0 if ideal else std * rng.standard_normal(len(recording.data))
     return run_case(case, recording)
 
 
@@ -105,16 +114,21 @@ def main(argv: Sequence[str] | None = None) -> int:
                              "diagnosis generator's, 0.15; the hydrofoil 0.04); 0: the "
                              "autopilot alone")
     parser.add_argument("--instrumented", action="store_true",
-                        help="record the wind (hovercraft) and the current (ROV) too")
+                        help="record the wind (hovercraft) and the current (ROV) too, with "
+                             "an anemometer's or a current profiler's noise")
+    parser.add_argument("--ideal", action="store_true",
+                        help="with --instrumented: record them exactly")
     parser.add_argument("--json", metavar="OUT", help="write every outcome as JSON")
     args = parser.parse_args(argv)
     vehicles = [v.strip() for v in args.vehicles.split(",") if v.strip()]
     unknown = sorted(set(vehicles) - set(VEHICLES))
     if unknown:
         parser.error(f"unknown vehicle(s) {unknown}; choose from {', '.join(VEHICLES)}")
+    if args.ideal and not args.instrumented:
+        parser.error("--ideal goes with --instrumented")
     seeds = [int(s) for s in args.seeds.split(",")]
     start = time.perf_counter()
-    outcomes = [run(env_id, case, args.dither, args.instrumented)
+    outcomes = [run(env_id, case, args.dither, args.instrumented, args.ideal)
                 for env_id, case in tqdm(cases(vehicles, seeds), desc="diagnosing", unit="case")]
     print("| case | found (confidence) | improvement | right | key parameter | s |")
     print("| --- | --- | ---: | --- | --- | ---: |")

@@ -35,10 +35,11 @@ def decay(effects=(), wn=1.0, zeta=0.02, phi0=0.3, duration=60.0, dt=0.1, noise=
 
 def zigzag(amplitude: float, c3: float = 0.0, K: float = -0.1, T: float = 8.0,
            duration: float = 100.0, dt: float = 0.2, seed: int = 0,
-           command: bool = False) -> Recording:
+           command: bool = False, gust: float = 0.0) -> Recording:
     """A zigzag amplitude/amplitude of a Nomoto ship with a Norrbin term ``c3 r^3``, rudder
     rate 15 deg/s, r and psi measured with small noise; the recorded rudder is the actual one,
-    or the (square-wave) command."""
+    or the (square-wave) command. ``gust``: the amplitude (rad/s^2) of a slow yaw moment of the
+    wind, ``w_r``, recorded as a column of its own."""
     truth = EffectModel(get_model("nomoto", K=K, T=T),
                         [Effect("nonlinear_damping", "r", {"c": c3})] if c3 else [])
     rate, a = math.radians(15.0) * dt, math.radians(amplitude)
@@ -51,10 +52,12 @@ def zigzag(amplitude: float, c3: float = 0.0, K: float = -0.1, T: float = 8.0,
         elif order < 0 and heading <= -a:
             order = a
         delta += float(np.clip(order - delta, -rate, rate))
-        rows.append((k * dt, order if command else delta, x[0], x[1]))  # held over the step
+        w = np.array([gust * math.sin(2 * math.pi * k * dt / 60.0)])
+        rows.append((k * dt, order if command else delta, w[0], x[0], x[1]))  # held over a step
         u = np.array([delta])
-        x = rk4(lambda z, t, u=u: truth.rhs(z, u, None, t), x, dt / 2, 2)
-    data = pd.DataFrame(rows, columns=["time", "delta", "r", "psi"])
+        x = rk4(lambda z, t, u=u, w=w: truth.rhs(z, u, w, t), x, dt / 2, 2)
+    data = pd.DataFrame(rows, columns=["time", "delta", "w_r", "r", "psi"])
+    data = data if gust else data.drop(columns="w_r")
     rng = np.random.default_rng(seed)
     data["r"] += 1e-4 * rng.standard_normal(len(data))
     data["psi"] += 1e-4 * rng.standard_normal(len(data))
@@ -162,6 +165,19 @@ def test_a_rudder_rate_limit_is_found_from_the_commanded_rudder():
     top = diagnosis.findings[0]
     assert (top.effect, top.target) == ("input_rate_limit", "delta")
     assert math.degrees(top.parameters["rate"]) == pytest.approx(15.0, rel=0.3)
+
+
+def test_a_recorded_wind_moment_is_an_input_of_the_simulated_model():
+    # a slow yaw moment (period 60 s) swings the heading by several degrees: without its
+    # record the free simulation cannot follow; with it the nominal model explains the series
+    series = [zigzag(a, gust=0.003, seed=k) for k, a in enumerate((10.0, 20.0))]
+    blind = diagnose([Recording(r.data.drop(columns="w_r"), model="nomoto") for r in series],
+                     "nomoto", calibrate="K,T")
+    told = diagnose(series, "nomoto", calibrate="K,T")
+    assert told.measured_disturbances == ("w_r",)
+    assert told.mismatch is False, told.summary()
+    assert told.calibration["K"] == pytest.approx(-0.1, rel=0.05)
+    assert blind.fit["before"]["rmse"]["psi"] > 5 * told.fit["before"]["rmse"]["psi"]
 
 
 def test_a_series_must_measure_the_same_channels():

@@ -104,12 +104,17 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
             return Diagnosis(vehicle.name, None, _other_model(rec, vehicle))
     vehicle = _with_measured_disturbances(vehicle, recordings)
     if method == "free" or (method == "auto" and _model_test(recordings)):
-        if isinstance(vehicle, MeasuredDisturbances):
-            raise ValueError(f"recorded disturbance column(s) "
-                             f"{list(vehicle.measured_disturbances)}: used in a record in a "
-                             "seaway (method 'innovations'); a model test is judged in free "
-                             "simulation without them: drop the columns")
-        return diagnose_series(recordings, vehicle, calibrate, log=log)
+        diagnosis = diagnose_series(recordings, vehicle, calibrate, log=log)
+    else:
+        diagnosis = _seaway(recordings, vehicle, calibrate, config, log)
+    if isinstance(vehicle, MeasuredDisturbances):
+        diagnosis.measured_disturbances = vehicle.measured_disturbances
+    return diagnosis
+
+
+def _seaway(recordings: Sequence[Recording], vehicle: VehicleModel, calibrate: Sequence[str],
+            config: DiagnosisConfig, log: Callable[[str], None] | None) -> Diagnosis:
+    """Steps 2-5 of the module doc, for one record in a seaway."""
     if len(recordings) > 1:
         raise ValueError("a series of recordings is judged in free simulation only: "
                          "use method='free' (or 'auto')")

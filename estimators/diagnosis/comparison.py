@@ -182,7 +182,7 @@ def input_candidates(series: Series) -> list[list[Candidate]]:
     model, dt = series.model, series.dt
     grids = []
     for j, name in enumerate(model.input_names):
-        if not series.moving[j]:
+        if not series.moving[j] or name not in model.actuator_names:  # not a measured wind
             continue
         c = np.concatenate([r.u[:, j] for r in series.runs]) - model.u0[j]
         slew = max(float(np.max(np.abs(np.diff(r.u[:, j])))) for r in series.runs) / dt

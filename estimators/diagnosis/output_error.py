@@ -31,7 +31,7 @@ from marine_envs.models.effects import Effect, applied_inputs, state_term
 from marine_envs.models.integrate import rk4
 from marine_envs.recording import Recording
 
-from .residuals import ANGLES, displacements, observable_states, white_noise_std
+from .residuals import ANGLES, displacements, model_inputs, observable_states, white_noise_std
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -101,7 +101,7 @@ class Series:
                              + ", ".join(f"{r.dt:g} s" for r in recordings))
         omega = max([_record_bandwidth(r) for r in recordings] + [_model_bandwidth(model, names)])
         factor = max(1, int(1 / (STEPS_PER_RADIAN * omega * dt)))
-        runs = [_run(r, channels, factor) for r in recordings]
+        runs = [_run(r, model, channels, factor) for r in recordings]
         y = np.concatenate([r.y for r in runs])
         scale = np.maximum(np.std(y, axis=0), 1e-9)
         moving = np.array([any(np.ptp(r.u[:, j]) > 0 for r in runs)
@@ -129,13 +129,13 @@ class Series:
         return [i for i in np.flatnonzero(self.excited()) if i not in kinematic]
 
 
-def _run(recording: Recording, channels: Sequence[str], factor: int) -> Run:
+def _run(recording: Recording, model: VehicleModel, channels: Sequence[str], factor: int) -> Run:
     y = recording.measurements.copy()
     for j, name in enumerate(channels):
         if name in ANGLES:
             y[:, j] = np.unwrap(y[:, j])
     noise = white_noise_std(y)
-    u, time = recording.inputs, recording.time - recording.time[0]
+    u, time = model_inputs(recording, model), recording.time - recording.time[0]
     if factor > 1:
         n = len(time) // factor * factor
         y = signal.resample_poly(y[:n], 1, factor, axis=0, padtype="line")

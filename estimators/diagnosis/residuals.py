@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import linalg, signal
+from scipy import linalg, ndimage, signal
 
 from marine_envs.models import VehicleModel
 from marine_envs.models.integrate import rk4
@@ -124,6 +124,33 @@ def equation_error(model: VehicleModel, x: FloatArray, u: FloatArray, dt: float,
     return (x[1:] - rk4_step(model, x[:-1], u[:-1], dt, substeps)) / dt
 
 
+def model_inputs(recording: Recording, model: VehicleModel) -> FloatArray:
+    """The record's inputs to ``model`` ``(T, n_u)``: the actuators as recorded, and any
+    measured disturbance (:class:`~marine_envs.models.MeasuredDisturbances`) cleared of its
+    sensor's white noise, which the model would otherwise take for a real wind or current
+    (:func:`denoised`)."""
+    u = recording.inputs_for(model).copy()
+    measured = len(recording.input_names)
+    u[:, measured:] = denoised(u[:, measured:])
+    return u
+
+
+def denoised(y: FloatArray, bins: int = 9) -> FloatArray:
+    """Columns of ``y`` cleared of white noise by a zero-phase Wiener low-pass: each frequency
+    kept in the share its signal has of the (smoothed) power there, the noise floor from
+    :func:`white_noise_std`, the gain never rising with frequency (isolated passbands in the
+    noise left narrow-band remnants that the ROV's moments took for waves)."""
+    if not y.size:
+        return y
+    mean = y.mean(axis=0)
+    spectrum = np.fft.rfft(y - mean, axis=0)
+    power = ndimage.uniform_filter1d(np.abs(spectrum) ** 2, bins, axis=0, mode="nearest")
+    floor = len(y) * white_noise_std(y) ** 2
+    gain = np.clip(1 - floor / np.maximum(power, 1e-300), 0.0, 1.0)
+    gain = np.minimum.accumulate(gain, axis=0)
+    return np.fft.irfft(gain * spectrum, n=len(y), axis=0) + mean
+
+
 def white_noise_std(y: FloatArray) -> FloatArray:
     """Per column, the standard deviation of white noise on a smooth signal: from the fourth
     differences (a white sequence's have variance 70 sigma^2; a signal sampled well above its
@@ -184,7 +211,7 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
     for j, name in enumerate(channels):
         if name in ANGLES:
             y[:, j] = np.unwrap(y[:, j])
-    u, dt = recording.inputs_for(model), recording.dt
+    u, dt = model_inputs(recording, model), recording.dt
     noise = white_noise_std(y)
     n = len(model.state_names)
     substeps = substeps_for(model, dt)

@@ -11,7 +11,6 @@ from typing import Any
 
 import numpy as np
 
-from marine_envs.models import MeasuredDisturbances
 from marine_envs.models.effects import Effect
 
 from .residuals import Forcing, Residuals
@@ -65,6 +64,8 @@ class Diagnosis:
     calibration_quality: dict[str, Any] = field(default_factory=dict)
     unexplained: dict[str, Any] = field(default_factory=dict)
     alternatives: list[dict[str, Any]] = field(default_factory=list)
+    #: recorded disturbances the model took as known inputs (a logged wind, current, command)
+    measured_disturbances: tuple[str, ...] = ()
     residuals: Residuals | None = field(default=None, repr=False)
     rollouts: Rollouts | None = field(default=None, repr=False)
     selection: Selection | None = field(default=None, repr=False)
@@ -100,13 +101,6 @@ class Diagnosis:
         if path is not None:
             Path(path).write_text(text + "\n")
         return text
-
-    @property
-    def measured_disturbances(self) -> tuple[str, ...]:
-        """The recorded disturbances the model took as inputs (a logged wind, current or
-        command)."""
-        model = getattr(self.residuals, "model", None)
-        return model.measured_disturbances if isinstance(model, MeasuredDisturbances) else ()
 
     def summary(self) -> str:
         """A few lines for a terminal."""
