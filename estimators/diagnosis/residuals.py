@@ -130,8 +130,8 @@ def model_inputs(recording: Recording, model: VehicleModel) -> FloatArray:
     sensor's white noise, which the model would otherwise take for a real wind or current
     (:func:`denoised`)."""
     u = recording.inputs_for(model).copy()
-    measured = len(recording.input_names)
-    u[:, measured:] = denoised(u[:, measured:])
+    actuators = len(recording.input_names)
+    u[:, actuators:] = denoised(u[:, actuators:])
     return u
 
 
