@@ -130,7 +130,7 @@ def model_inputs(recording: Recording, model: VehicleModel) -> FloatArray:
     sensor's white noise, which the model would otherwise take for a real wind or current
     (:func:`denoised`)."""
     u = recording.inputs_for(model).copy()
-    actuators = len(recording.input_names)
+    actuators = len(model.actuator_names)  # the measured disturbances follow them
     u[:, actuators:] = denoised(u[:, actuators:])
     return u
 
