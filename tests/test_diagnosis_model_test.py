@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from estimators.diagnosis import diagnose
-from estimators.diagnosis.modes import decay_analysis, model_modes
+from estimators.diagnosis.modes import decay_analysis, model_modes, nearest_mode
 from estimators.diagnosis.output_error import Series, Structure, basis
 from marine_envs.models import get_model
 from marine_envs.models.effects import Effect, EffectModel
@@ -91,6 +91,8 @@ def test_model_modes_are_the_ones_the_channels_see():
     roll = [m for m in model_modes(usv, ["phi"]) if m[1] < 1]
     assert roll == [pytest.approx((0.8, 0.1))]
     assert all(m[1] >= 1 for m in model_modes(get_model("nomoto"), ["r"]))
+    rov = get_model("rov")  # an unstable real pole at 1.01 1/s (zeta -1) is no oscillation
+    assert abs(nearest_mode(rov, rov.state_names, 1.0)[1]) < 1
 
 
 def test_batched_simulation_equals_one_simulation_per_parameter_set():

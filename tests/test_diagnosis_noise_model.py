@@ -1,13 +1,15 @@
 """The diagnosis's noise model: the sea as coloured forcing, and the tests that keep a chance
 fluctuation from becoming a finding."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from agents.simulate import simulate
 from estimators.diagnosis import diagnose
 from estimators.diagnosis.cases import Case, build_effect, run_case
-from estimators.diagnosis.hypotheses import _in_both_halves, _targets
+from estimators.diagnosis.hypotheses import _at_natural_frequency, _in_both_halves, _targets
 from estimators.diagnosis.residuals import denoised, estimate, model_noise_spread
 from estimators.diagnosis.synthetic import SEA, synthesize, typical_effect
 from marine_envs.models import get_model
@@ -78,6 +80,25 @@ def test_a_wave_must_persist_through_the_record():
     assert _in_both_halves(noise + line, 1.2, 0.1, 1e-4)
     assert not _in_both_halves(noise + np.where(t < 150, line, 0.0), 1.2, 0.1, 1e-4)
     assert not _in_both_halves(noise, 1.2, 0.1, 1e-4)
+
+
+def test_only_an_oscillatory_mode_explains_a_spectral_peak_away():
+    def rings(model: str, omega: float) -> bool:
+        return _at_natural_frequency(SimpleNamespace(model=get_model(model)),
+                                     {"omega": omega, "resolution": 0.1})
+
+    assert rings("usv", 0.63)  # its roll mode (zeta 0.09): the sea rings it in every record
+    assert rings("rov", 5.66)  # a lightly damped mode
+    assert not rings("rov", 1.0)  # its unstable real pole at 1.01 1/s rings at no frequency
+    assert not rings("usv", 2.0)
+
+
+def test_a_heave_wave_forcing_on_the_rov_is_found():
+    # every ROV wave case (1 rad/s, on w) went unseen while its real pole counted as a mode
+    effect = typical_effect("rov", "wave_frequency", "w", seed=0)
+    diagnosis = diagnose(synthesize("rov", [effect], seed=0, noise=0.05), "rov")
+    assert (diagnosis.findings[0].effect, diagnosis.findings[0].target) == ("wave_frequency", "w")
+    assert diagnosis.findings[0].parameters["omega"] == pytest.approx(1.0, abs=0.1)
 
 
 def test_a_model_s_own_sea_keeps_its_stated_noise_and_is_no_target():

@@ -255,13 +255,15 @@ def wave_families(res: Residuals, alpha: float = 1e-4, max_zeta: float = 0.1) ->
 
 
 def _at_natural_frequency(res: Residuals, peak: dict[str, float]) -> bool:
-    """Whether the peak sits on a lightly damped mode of the nominal model: the sea rings
-    such a mode, and the filter's process noise (white, the sea is not) leaves a peak there
-    in every record. Wrong damping of that mode is a ``linear_damping`` finding instead."""
+    """Whether the peak sits on a lightly damped (or lightly growing) oscillatory mode of the
+    nominal model: the sea rings such a mode, and the filter's process noise (white, the sea is
+    not) leaves a peak there in every record. Wrong damping of that mode is a
+    ``linear_damping`` finding instead. A real pole rings at no frequency: the ROV's unstable
+    real pole at 1.01 1/s once hid every heave wave forcing near 1 rad/s."""
     eigenvalues = np.linalg.eigvals(res.model.linearize()[0])
     frequency = np.abs(eigenvalues)
     zeta = -eigenvalues.real / np.maximum(frequency, 1e-12)
-    light = (frequency > 0) & (zeta < 0.3)
+    light = (np.abs(eigenvalues.imag) > 1e-9) & (np.abs(zeta) < 0.3)
     reach = np.maximum(2 * peak["resolution"], 2 * zeta * frequency)
     return bool(np.any(light & (np.abs(peak["omega"] - frequency) <= reach)))
 

@@ -149,8 +149,9 @@ def model_modes(model: VehicleModel, channels: Sequence[str]) -> list[tuple[floa
 
 def nearest_mode(model: VehicleModel, channels: Sequence[str],
                  omega: float) -> tuple[float, float] | None:
-    """The model's observable oscillatory mode nearest ``omega`` (rad/s)."""
-    oscillatory = [m for m in model_modes(model, channels) if m[1] < 1.0]
+    """The model's observable oscillatory mode nearest ``omega`` (rad/s): a real pole (``zeta``
+    1, or -1 when unstable) rings at no frequency."""
+    oscillatory = [m for m in model_modes(model, channels) if abs(m[1]) < 1.0]
     return min(oscillatory, key=lambda m: abs(math.log(m[0] / omega)), default=None)
 
 
