@@ -22,6 +22,7 @@ from scipy import signal, stats
 
 from marine_envs.models.effects import Effect, applied_inputs
 
+from .modes import model_modes
 from .residuals import Residuals, _output_matrix, displacements
 
 FloatArray = NDArray[np.float64]
@@ -258,14 +259,12 @@ def _at_natural_frequency(res: Residuals, peak: dict[str, float]) -> bool:
     """Whether the peak sits on a lightly damped (or lightly growing) oscillatory mode of the
     nominal model: the sea rings such a mode, and the filter's process noise (white, the sea is
     not) leaves a peak there in every record. Wrong damping of that mode is a
-    ``linear_damping`` finding instead. A real pole rings at no frequency: the ROV's unstable
-    real pole at 1.01 1/s once hid every heave wave forcing near 1 rad/s."""
-    eigenvalues = np.linalg.eigvals(res.model.linearize()[0])
-    frequency = np.abs(eigenvalues)
-    zeta = -eigenvalues.real / np.maximum(frequency, 1e-12)
-    light = (np.abs(eigenvalues.imag) > 1e-9) & (np.abs(zeta) < 0.3)
-    reach = np.maximum(2 * peak["resolution"], 2 * zeta * frequency)
-    return bool(np.any(light & (np.abs(peak["omega"] - frequency) <= reach)))
+    ``linear_damping`` finding instead. A real pole (``zeta`` +-1) rings at no frequency: the
+    ROV's unstable real pole at 1.01 1/s once hid every heave wave forcing near 1 rad/s."""
+    model = res.model
+    return any(abs(zeta) < 0.3
+               and abs(peak["omega"] - omega) <= max(2 * peak["resolution"], 2 * zeta * omega)
+               for omega, zeta in model_modes(model, model.state_names))
 
 
 def _in_both_halves(x: FloatArray, omega: float, dt: float, alpha: float) -> bool:
