@@ -3,7 +3,7 @@ recordings, with the environments' own seas, sensors (noise, quantization, slow 
 LQR autopilot, not the diagnosis's generator (``estimators.diagnosis.synthesize``).
 
 Each case hides one catalogue effect in the environment (``gym.make(ENV_ID, effects=[...])``,
-the effect sized by :func:`estimators.diagnosis.typical_effect` at strength 0.3), records 300 s
+the effect sized at strength 0.3 as in the acceptance set, ``cases.build_effect``), records 300 s
 of a closed-loop identification experiment (``agents.simulate``, policy ``lqr`` with a
 random-step dither on every input of the share of its half range that the diagnosis's own
 generator uses; ``--dither 0``: the autopilot alone) and diagnoses the record against the
@@ -36,8 +36,7 @@ import numpy as np
 from tqdm import tqdm
 
 from agents.simulate import simulate
-from estimators.diagnosis import typical_effect
-from estimators.diagnosis.cases import Case, run_case, summarize
+from estimators.diagnosis.cases import Case, build_effect, run_case, summarize
 from estimators.diagnosis.synthetic import DEFAULT_DITHER_SHARE, DITHER_SHARE
 from marine_envs.models.effects import Effect
 
@@ -77,7 +76,7 @@ def cases(vehicles: Sequence[str], seeds: Sequence[int]) -> list[tuple[str, Case
         env_id, entries = VEHICLES[vehicle]
         for seed in seeds:
             for effect, target, extra in entries:
-                hidden = typical_effect(vehicle, effect, target, seed=seed, **extra)
+                hidden = build_effect(vehicle, (effect, target, extra), seed=seed)
                 out.append((env_id, Case(vehicle, (hidden,), 0.0, seed, DURATION)))
             out.append((env_id, Case(vehicle, (), 0.0, 100 + seed, DURATION)))
     return out

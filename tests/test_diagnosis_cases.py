@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimators.diagnosis import Diagnosis, Finding
+from estimators.diagnosis import Diagnosis, Finding, typical_effect
 from estimators.diagnosis.cases import (
     LEFT_OUT,
     PAIRS,
@@ -116,6 +116,10 @@ def test_confusion_and_summary():
         "sensor_bias": {"current": 1}, "none": {"current": 1, "none": 1}}
     rates = summarize(outcomes)
     assert rates["ranked_right"]["rate"] == 0.25 and rates["ranked_right"]["n"] == 4
+    assert rates["right"]["rate"] == 0.25  # the ranked-right one's parameter is within 30 %
+    off = summarize([score(case(DAMPING), diagnosis(finding("quadratic_damping", "r", c=-9.0)),
+                           1)])
+    assert off["ranked_right"]["rate"] == 1.0 and off["right"]["rate"] == 0.0
     assert rates["parameter_ok"]["rate"] == 0.5 and rates["parameter_ok"]["n"] == 2
     assert rates["clean"]["rate"] == 0.5 and not rates["clean"]["passed"]
 
@@ -190,3 +194,16 @@ def test_sindy_term_names_with_underscores():
     Effect(mapped[0], mapped[1], {**mapped[2], "c": 1.0}).check(foil)
     with pytest.raises(ValueError, match="nope"):
         sindy_term_to_effect("nope", "xi", foil.state_names, foil.input_names)
+
+
+def test_the_hydrofoils_state_terms_are_sized_against_its_models_own_forces():
+    """Its pitch acceleration is a near balance of the foils' lift and the sea's: 30 % of the
+    net would be a damping term of ~2 % of the model's own, which no record could show."""
+    A, _, _ = get_model("hydrofoil").linearize()
+    q = get_model("hydrofoil").state_names.index("theta_dot")
+    entry = ("linear_damping", "theta_dot", {})
+    sized = build_effect("hydrofoil", entry).parameters["c"] / A[q, q]
+    net = typical_effect("hydrofoil", *entry[:2]).parameters["c"] / A[q, q]
+    assert 0.1 < sized < 0.3 and 0 < net < 0.03
+    with pytest.raises(ValueError, match="against='force'"):
+        typical_effect("hydrofoil", *entry[:2], against="force")

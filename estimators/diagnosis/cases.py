@@ -109,6 +109,11 @@ PAIRS: dict[str, list[tuple[Entry, Entry]]] = {
     "dp_vessel": [(("input_gain", "X", {}), ("linear_damping", "v", {})),
                   (("quadratic_damping", "u", {}), ("coupling", "r", {"source": "v"}))],
 }
+#: What each vehicle's state terms are sized against (``typical_effect``'s ``against``). The
+#: hydrofoil's accelerations are a near balance of its foils' lift and the sea's (the spread of
+#: its sea-free pitch acceleration is 8x that of the net one), so 30 % of the net would be 1.6 %
+#: of its pitch damping: below any model's accuracy, and not what a model gets wrong.
+SIZED_AGAINST: dict[str, str] = {"hydrofoil": "model"}
 #: Effect-free cases use seeds from here on, apart from the effect cases' seeds.
 EFFECT_FREE_SEED = 100
 #: A finding at or above this confidence is a claim (a false alarm on an effect-free record).
@@ -118,7 +123,7 @@ PARAMETER_TOLERANCE, CHANGE_TIME_TOLERANCE = 0.30, 10.0
 #: The held-out fractional improvement a diagnosis of a record with effects must reach.
 MIN_IMPROVEMENT = 0.30
 #: Acceptance: the share of cases that must pass each check.
-ACCEPTANCE = {"ranked_right": 0.90, "parameter_ok": 0.90, "improvement_ok": 0.90,
+ACCEPTANCE = {"right": 0.90, "ranked_right": 0.90, "parameter_ok": 0.90, "improvement_ok": 0.90,
               "clean": 0.95}
 
 
@@ -189,7 +194,8 @@ def _sized(model: str, effect: str, target: str, extra: tuple[tuple[str, str], .
            strength: float, seed: int, duration: float) -> Effect:
     """``typical_effect`` (a pilot simulation, ~2 s), cached on hashable arguments."""
     return typical_effect(model, effect, target, strength=strength, seed=seed,
-                          duration=duration, **dict(extra))
+                          duration=duration, against=SIZED_AGAINST.get(model, "acceleration"),
+                          **dict(extra))
 
 
 def build_effect(model: str, entry: Entry, strength: float = 0.3, seed: int = 0,
@@ -304,13 +310,15 @@ def _rate(flags: Iterable[bool | None]) -> tuple[float | None, int]:
 
 
 def summarize(outcomes: Sequence[Outcome]) -> dict[str, dict[str, Any]]:
-    """The four acceptance rates, each ``{"rate", "n", "target", "passed"}`` (rate None and
-    passed True when no case applies): ranked right and improvement >= 0.30 among cases with
-    effects, key parameter within tolerance among matched findings, and the share of
-    effect-free cases without a false alarm."""
+    """The acceptance rates, each ``{"rate", "n", "target", "passed"}`` (rate None and passed
+    True when no case applies): among cases with effects, *right* (ranked right with the key
+    parameter within tolerance: the issue's criterion), ranked right and improvement >= 0.30;
+    key parameter within tolerance among matched findings; the share of effect-free cases
+    without a false alarm."""
     effects = [o for o in outcomes if o.true]
     free = [o for o in outcomes if not o.true]
-    flags = {"ranked_right": [o.ranked_right for o in effects],
+    flags = {"right": [o.ranked_right and bool(o.parameter_ok) for o in effects],
+             "ranked_right": [o.ranked_right for o in effects],
              "parameter_ok": [o.parameter_ok for o in effects],
              "improvement_ok": [o.improvement_ok for o in effects],
              "clean": [not o.false_alarm for o in free]}

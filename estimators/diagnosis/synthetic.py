@@ -118,17 +118,23 @@ def synthesize(model: str | VehicleModel, effects: Sequence[Effect] = (), *,
 
 def typical_effect(model: str, effect: str, target: str, *, strength: float = 0.3,
                    seed: int = 0, duration: float = 300.0, dt: float = 0.1,
-                   **extra: Any) -> Effect:
+                   against: str = "acceleration", **extra: Any) -> Effect:
     """An effect sized against a nominal run of the same vehicle, so that its term is about
     ``strength`` times the natural spread of the quantity it disturbs.
 
-    State terms: ``strength`` times the standard deviation of ``x_dot[target]``. Input effects:
+    State terms: ``strength`` times the standard deviation of ``x_dot[target]``; with
+    ``against="model"``, of the nominal model's own ``x_dot[target]`` without the sea (for a
+    vehicle whose accelerations are a near balance of large forces, such as the hydrofoil's
+    foil lift against the sea's, the terms a model would get wrong). Input effects:
     a gain of ``1 - strength``, a delay of ``strength`` times the dominant closed-loop time
     scale, limits at ``2 * (1 - strength)`` standard deviations of the command, a dead zone of
     ``strength`` standard deviations, a rate limit at ``1 - strength`` of the command's rate
     spread. A parameter change happens at 55 % of the record. ``extra`` sets ``source``,
     ``expression``, ``what``, ``form`` or any parameter outright.
     """
+    if against not in ("acceleration", "model"):
+        raise ValueError(f"against={against!r}: size state terms against 'acceleration' or "
+                         "'model'")
     vehicle = get_model(model)
     pilot = synthesize(vehicle, duration=duration, dt=dt, noise=0.0, seed=seed,
                        measured=vehicle.state_names)
@@ -151,6 +157,8 @@ def typical_effect(model: str, effect: str, target: str, *, strength: float = 0.
         outputs = vehicle.output(x) if vehicle.output_names != names else x
         return Effect(effect, target, {"b": strength * float(np.std(outputs[:, k])), **extra})
     i = names.index(target)
+    if against == "model":
+        x_dot = vehicle.rhs(x, u)
     rate = strength * float(np.std(x_dot[:, i]))
     source = extra.get("source", target)
     s = names.index(source) if source in names else i
