@@ -139,7 +139,6 @@ def typical_effect(model: str, effect: str, target: str, *, strength: float = 0.
     pilot = synthesize(vehicle, duration=duration, dt=dt, noise=0.0, seed=seed,
                        measured=vehicle.state_names)
     x, u = pilot.measurements, pilot.inputs
-    x_dot = np.gradient(x, dt, axis=0)
     names = vehicle.state_names
     spread = np.std(x, axis=0) + 1e-12
     if effect in ("input_gain", "input_delay", "input_saturation", "input_deadzone",
@@ -157,8 +156,7 @@ def typical_effect(model: str, effect: str, target: str, *, strength: float = 0.
         outputs = vehicle.output(x) if vehicle.output_names != names else x
         return Effect(effect, target, {"b": strength * float(np.std(outputs[:, k])), **extra})
     i = names.index(target)
-    if against == "model":
-        x_dot = vehicle.rhs(x, u)
+    x_dot = vehicle.rhs(x, u) if against == "model" else np.gradient(x, dt, axis=0)
     rate = strength * float(np.std(x_dot[:, i]))
     source = extra.get("source", target)
     s = names.index(source) if source in names else i
