@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from marine_envs.models.effects import Effect
 
+from .hypotheses import rate_limit_grid
 from .output_error import Fit, Series, Structure, basis, fit, jacobian, term_label
 
 FloatArray = NDArray[np.float64]
@@ -186,10 +187,8 @@ def input_candidates(series: Series) -> list[list[Candidate]]:
             continue
         c = np.concatenate([r.u[:, j] for r in series.runs]) - model.u0[j]
         slew = max(float(np.max(np.abs(np.diff(r.u[:, j])))) for r in series.runs) / dt
-        rates = np.radians(np.geomspace(1.0, 30.0, GRID)) if model.input_units[j] == "rad" \
-            else np.geomspace(0.03, 1.0, GRID) * slew
         for effect, key, values in (
-                ("input_rate_limit", "rate", rates[rates < slew]),
+                ("input_rate_limit", "rate", rate_limit_grid(model.input_units[j], slew, GRID)),
                 ("input_delay", "tau", np.unique(np.round(np.geomspace(dt, 3.0, GRID) / dt)) * dt),
                 ("input_saturation", "limit", np.linspace(0.3, 0.97, GRID) * np.abs(c).max())):
             if values.size:

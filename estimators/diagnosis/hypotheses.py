@@ -33,6 +33,20 @@ CHANGE_TIMES = 60
 MAX_WAVE_FREQUENCY = 6.0
 #: Grid points of a delay (in samples up to 3 s), a limit, a dead zone or a rate limit.
 GRID_POINTS = 25
+#: The physical span of an actuator's rate limit: 1-30 deg/s for a rudder or other angle, else
+#: 3-100 % of the fastest commanded slew (a quantile of the commanded rates would miss a limit
+#: below the typical command, and a square wave's commands have one rate).
+ANGLE_RATES = np.radians((1.0, 30.0))
+SLEW_FRACTIONS = (0.03, 1.0)
+
+
+def rate_limit_grid(unit: str, slew: float, points: int) -> FloatArray:
+    """Rate limits to try on an input in ``unit`` whose fastest commanded slew is ``slew``
+    [unit/s]: ``points`` geometrically spaced over the physical span, those below ``slew``
+    (a limit above it never acts)."""
+    low, high = ANGLE_RATES if unit == "rad" else np.multiply(SLEW_FRACTIONS, slew)
+    rates = np.geomspace(low, high, points)
+    return rates[rates < slew]
 
 
 @dataclass
@@ -194,15 +208,15 @@ def input_families(res: Residuals) -> Iterator[Family]:
             continue
         yield Family("input_gain", name, [{}], terms([Effect("input_gain", name, {"k": 2.0})]),
                      coefficient="k", offset=1.0)
-        magnitude, rates = np.abs(c), np.abs(np.diff(c)) / dt
+        magnitude = np.abs(c)
         levels = np.linspace(0.5, 0.995, GRID_POINTS)
         grids = {
             "input_delay": ("tau", dt * np.arange(1, max(2, int(round(3.0 / dt))) + 1)),
             "input_saturation": ("limit", np.quantile(magnitude, levels)),
             "input_deadzone": ("width", np.quantile(magnitude, np.linspace(0.02, 0.6,
                                                                             GRID_POINTS))),
-            "input_rate_limit": ("rate", np.quantile(rates[rates > 0], levels)
-                                 if np.any(rates > 0) else np.array([])),
+            "input_rate_limit": ("rate", rate_limit_grid(model.input_units[j], float(
+                np.max(np.abs(np.diff(c)))) / dt, GRID_POINTS)),
         }
         for effect, (parameter, grid) in grids.items():
             grid = np.unique(grid[grid > 0])
