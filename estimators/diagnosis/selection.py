@@ -37,6 +37,9 @@ from .residuals import Residuals
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+#: Times tried in each pass of a change time's refinement (one sample apart when they span
+#: no more than this many samples).
+FINE_TIMES = 300
 
 
 @dataclass(frozen=True)
@@ -230,6 +233,9 @@ def select(residuals: Residuals, config: DiagnosisConfig = DiagnosisConfig()) ->
         best = next((s for s in scored if s.p_value <= config.alpha and s.gain > 0), None)
         if best is None:
             break
+        if best.family.effect == "parameter_change":  # ranked on its best grid time's fit
+            best.fitted = fit_member(residuals, evaluator, accepted, best.family,
+                                     response(best.family))
         findings.append(best)
     if len(findings) > 1:
         _backfit(residuals, evaluator, findings)
@@ -261,7 +267,7 @@ def _score(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], before:
     t, p = gain_test(before, after, int(round(config.block / res.dt)))
     sigma2 = float(np.mean(before**2))  # per channel and sample
     b, a = float(np.sum(before**2)), float(np.sum(after**2))
-    fitted = fit_member(res, evaluator, accepted, family, G)
+    fitted = fit_member(res, evaluator, accepted, family, G, search=True)
     # a simpler term that explains as much is preferred: a BIC charge per extra parameter and
     # the description length of the member chosen (which source, delay, time, library term)
     charge = 0.5 * math.log(before.size) * (family.n_parameters - 1) \
@@ -271,13 +277,15 @@ def _score(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], before:
 
 
 def fit_member(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], family: Family,
-               G: FloatArray, rows: BoolArray | None = None) -> Fitted:
+               G: FloatArray, rows: BoolArray | None = None, search: bool = False) -> Fitted:
     """The family's best member and coefficient on ``rows`` (default: the whole record) given
-    the accepted terms, with standard deviations."""
+    the accepted terms, with standard deviations. A change time is refined about the best
+    grid time while ``search`` ranks the candidates, over the whole record for a finding
+    (:func:`_refined_change`)."""
     sse, coef, _ = evaluator.fit(accepted, G, family.free, rows)
     r = int(np.argmin(sse))
     if family.effect == "parameter_change":
-        return _refined_change(res, evaluator, accepted, family, r, rows)
+        return _refined_change(res, evaluator, accepted, family, sse, rows, search)
     n_rows = int(rows.sum()) if rows is not None else len(evaluator.nu)
     sigma2 = max(float(sse[r]), 1e-300) / max(n_rows * evaluator.nu.shape[1], 1)
     std: dict[str, float] = {}
@@ -325,20 +333,32 @@ def _with_member(family: Family, r: int, parameters: dict[str, Any]) -> Family:
 
 
 def _refined_change(res: Residuals, evaluator: Evaluator, accepted: list[Fitted],
-                    family: Family, r: int, rows: BoolArray | None) -> Fitted:
-    """A change time refined to one sample around the grid's best, its std from where the sum
-    of squares rises by one residual variance."""
-    times = family.details["times"]
+                    family: Family, coarse: FloatArray, rows: BoolArray | None,
+                    best_only: bool = False) -> Fitted:
+    """A change time refined to one sample, about the best grid time (``best_only``: the
+    ranking's candidates) or over the whole grid's span (a finding: where the state a damping
+    change acts through is quiet the grid times fit alike, and the truth may be a dip narrower
+    than the grid's spacing beside them), :data:`FINE_TIMES` times at a pass. Its std from
+    where the sum of squares rises by one residual variance."""
+    times = np.asarray(family.details["times"])
+    best = int(np.argmin(coarse))
     spacing = float(times[1] - times[0]) if len(times) > 1 else res.dt * 10
-    best = family.members[r]
-    fine = np.arange(best["time"] - spacing, best["time"] + spacing + res.dt / 2, res.dt)
-    fine = fine[(fine > res.time[0]) & (fine < res.time[-1])]
-    local = next(f for f in change_families(res, times=fine, target=family.target)
-                 if f.members[0]["what"] == best["what"])
-    G = res.innovations.response(local.w, local.v)  # type: ignore[union-attr]
-    sse, coef, _ = evaluator.fit(accepted, G, True, rows)
-    k = int(np.argmin(sse))
+    low, high = (times[best] - spacing, times[best] + spacing) if best_only \
+        else (times[0], times[-1])
+    what = family.members[best]["what"]
     n_rows = int(rows.sum()) if rows is not None else len(evaluator.nu)
+    while True:
+        step = max(res.dt, (high - low) / FINE_TIMES)
+        fine = np.arange(low, high + step / 2, step)
+        fine = fine[(fine > res.time[0]) & (fine < res.time[-1])]
+        local = next(f for f in change_families(res, times=fine, target=family.target)
+                     if f.members[0]["what"] == what)
+        G = res.innovations.response(local.w, local.v)  # type: ignore[union-attr]
+        sse, coef, _ = evaluator.fit(accepted, G, True, rows)
+        k = int(np.argmin(sse))
+        if step <= res.dt * 1.001:
+            break
+        low, high = fine[k] - step, fine[k] + step
     sigma2 = max(float(sse[k]), 1e-300) / max(n_rows * evaluator.nu.shape[1], 1)
     within = fine[sse <= sse[k] + sigma2 * 2]
     std = {"time": float(max((within.max() - within.min()) / 2, res.dt)),
