@@ -104,6 +104,16 @@ def test_a_rudder_rate_limit_is_found_within_30_percent():
     assert outcome.ranked_right and outcome.parameter_ok, outcome
 
 
+def test_a_damping_change_is_timed_to_a_second_though_the_damped_yaw_then_falls_quiet():
+    # the 60 search times fit alike after the change (yaw rate ~1e-3 rad/s for 40 s); the true
+    # time is a dip 1.4 s wide between two of them, which the refinement must not miss
+    effect = build_effect("hovercraft", ("parameter_change", "r", {}), seed=0)
+    diagnosis = diagnose(Case("hovercraft", (effect,), 0.05, 0).recording())
+    top = diagnosis.findings[0]
+    assert (top.effect, top.target) == ("parameter_change", "r")
+    assert abs(top.parameters["time"] - effect.parameters["time"]) < 1.0, top.parameters
+
+
 def test_a_model_its_findings_cannot_mend_is_refused_naming_them(monkeypatch):
     monkeypatch.setattr(api, "WORSE_THAN_HOLDING", 0.0)  # every model too poor to predict
     effect = typical_effect("usv", "current", "r", strength=0.5, duration=120)
