@@ -34,8 +34,9 @@ MAX_WAVE_FREQUENCY = 6.0
 #: Grid points of a delay (in samples up to 3 s), a limit, a dead zone or a rate limit.
 GRID_POINTS = 25
 #: The physical span of an actuator's rate limit: 1-30 deg/s for a rudder or other angle, else
-#: 3-100 % of the fastest commanded slew (a quantile of the commanded rates would miss a limit
-#: below the typical command, and a square wave's commands have one rate).
+#: 3-100 % of the fastest commanded slew (quantiles of the commanded rates, heavy-tailed where
+#: the command steps, left a gap from 3 to 64 deg/s about a USV's limit; a square wave's
+#: commands have a single rate).
 ANGLE_RATES = np.radians((1.0, 30.0))
 SLEW_FRACTIONS = (0.03, 1.0)
 

@@ -347,6 +347,7 @@ def _refined_change(res: Residuals, evaluator: Evaluator, accepted: list[Fitted]
         else (times[0], times[-1])
     what = family.members[best]["what"]
     n_rows = int(rows.sum()) if rows is not None else len(evaluator.nu)
+    tried, fits = [], []  # every pass's times and sums of squares, for the std
     while True:
         step = max(res.dt, (high - low) / FINE_TIMES)
         fine = np.arange(low, high + step / 2, step)
@@ -356,13 +357,16 @@ def _refined_change(res: Residuals, evaluator: Evaluator, accepted: list[Fitted]
         G = res.innovations.response(local.w, local.v)  # type: ignore[union-attr]
         sse, coef, _ = evaluator.fit(accepted, G, True, rows)
         k = int(np.argmin(sse))
+        tried.append(fine)
+        fits.append(sse)
         if step <= res.dt * 1.001:
             break
         low, high = fine[k] - step, fine[k] + step
     sigma2 = max(float(sse[k]), 1e-300) / max(n_rows * evaluator.nu.shape[1], 1)
-    within = fine[sse <= sse[k] + sigma2 * 2]
+    all_sse = np.concatenate(fits)
+    within = np.concatenate(tried)[all_sse <= sse[k] + sigma2 * 2]
     std = {"time": float(max((within.max() - within.min()) / 2, res.dt)),
-           "c": float(abs(coef[k]) / math.sqrt(max((sse.max() - sse[k]) / sigma2, 1.0)))}
+           "c": float(abs(coef[k]) / math.sqrt(max((all_sse.max() - sse[k]) / sigma2, 1.0)))}
     return _fitted(res, local, k, float(coef[k]), G[:, :, k] * coef[k], std)
 
 
