@@ -334,8 +334,8 @@ def _with_member(family: Family, r: int, parameters: dict[str, Any]) -> Family:
 
 def _refined_change(res: Residuals, evaluator: Evaluator, accepted: list[Fitted],
                     family: Family, coarse: FloatArray, rows: BoolArray | None,
-                    best_only: bool = False) -> Fitted:
-    """A change time refined to one sample, about the best grid time (``best_only``: the
+                    search: bool = False) -> Fitted:
+    """A change time refined to one sample, about the best grid time (``search``: the
     ranking's candidates) or over the whole grid's span (a finding: where the state a damping
     change acts through is quiet the grid times fit alike, and the truth may be a dip narrower
     than the grid's spacing beside them), :data:`FINE_TIMES` times at a pass. Its std from
@@ -343,7 +343,7 @@ def _refined_change(res: Residuals, evaluator: Evaluator, accepted: list[Fitted]
     times = np.asarray(family.details["times"])
     best = int(np.argmin(coarse))
     spacing = float(times[1] - times[0]) if len(times) > 1 else res.dt * 10
-    low, high = (times[best] - spacing, times[best] + spacing) if best_only \
+    low, high = (times[best] - spacing, times[best] + spacing) if search \
         else (times[0], times[-1])
     what = family.members[best]["what"]
     n_rows = int(rows.sum()) if rows is not None else len(evaluator.nu)
