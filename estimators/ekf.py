@@ -390,6 +390,17 @@ class ExtendedKalmanFilter(Estimator):
                              f"(T, {self.batch_size}, {width})")
         return a
 
+    def held_input_response(self, z: ArrayLike, u: ArrayLike) -> FloatArray:
+        """``Gamma = int_0^dt exp(A s) ds`` ``(N, n, n)``, s: how much one period moves the
+        model states per unit state derivative held over it, linearised about each row of the
+        states ``z`` ``(N, n + p)`` with inputs ``u`` ``(N, n_u)`` (the augmented exponential
+        the transition ``Phi = exp(A dt)`` comes from; exact for a stiff mode, where the
+        trapezoid ``dt (Phi + I) / 2`` is not)."""
+        z, u = np.atleast_2d(np.asarray(z, dtype=float)), np.atleast_2d(np.asarray(u, dtype=float))
+        A = self._state_jacobian(z, u)[:, :, :self._n]
+        unit = np.broadcast_to(np.eye(self._n), A.shape)
+        return _transition_rows(np.concatenate([A, unit], axis=2) * self.dt)[:, :, self._n:]
+
     def _input(self, u: ArrayLike, dt: float | None) -> tuple[FloatArray, float]:
         dt = self.dt if dt is None else float(dt)
         if not (math.isfinite(dt) and dt > 0):

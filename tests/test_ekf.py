@@ -1,6 +1,8 @@
 """The extended Kalman filter: agreement with the linear filter, joint parameter estimation,
 tracking with artificial process noise, the RTS smoother, missing data and bad input."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -64,6 +66,17 @@ def test_parameter_converges_to_the_truth_within_its_uncertainty():
     w, std = res.x[-1, 0, 2], res.std[-1, 0, 2]
     assert abs(w - 1.3) < max(3 * std, 2e-3)
     assert std < 0.01 < res.std[0, 0, 2]
+
+
+def test_held_input_response_is_the_exact_integral_for_a_stiff_mode():
+    """``x_dot = -a x`` held over 0.1 s with ``a = 47`` 1/s: ``(1 - exp(-a dt)) / a``, where the
+    trapezoid ``dt (Phi + 1) / 2`` is 2.4x too large."""
+    a, dt = 47.0, 0.1
+    ekf = ExtendedKalmanFilter(lambda x, u, _theta: -a * x, lambda x: x, dt=dt, Q=[[1e-6]],
+                               R=[[1e-4]], n_inputs=1, state_names=["x"],
+                               measurement_names=["x"], substeps=10)
+    gamma = ekf.held_input_response([[0.3], [-2.0]], [[0.0], [0.0]])
+    np.testing.assert_allclose(gamma[:, 0, 0], (1 - math.exp(-a * dt)) / a, rtol=1e-9)
 
 
 def test_analytic_jacobian_gives_the_same_filter():

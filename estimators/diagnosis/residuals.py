@@ -239,7 +239,7 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
                                                  substeps, forcing, u, y)
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
                      error, noise, observable_states(model, channels), substeps,
-                     Innovations.from_filter(ekf, smoothed.filtered, dt, n),
+                     Innovations.from_filter(ekf, smoothed.filtered, u, n),
                      _with_levels(forcing, smoothed.x[:, 0, n + len(forcing):]))
 
 
