@@ -12,11 +12,12 @@ from marine_envs.models import get_model
 from marine_envs.models.effects import Effect, ModelWithEffects
 
 #: (model, measured channels, process noise per step, the state a constant term is added to,
-#: its size): the USV's roll angle alone, so a roll moment acts on the unmeasured p; the
-#: hydrofoil's heave and pitch, with a stiff pitch mode (47 1/s, |lambda| dt = 4.7 at 10 Hz),
-#: where a trapezoidal one-step integral of the term is 17 % off.
-CASES = [("usv", ("phi",), [1e-8, 1e-7, 1e-8, 1e-7, 1e-8], "p", 2e-4),
-         ("hydrofoil", ("xi", "theta"), [1e-5, 1e-5, 1e-3, 1e-3], "theta_dot", 0.2)]
+#: its size, the agreement asked for as a share of the largest change): the USV's roll angle
+#: alone, so a roll moment acts on the unmeasured p (linear: exact); the hydrofoil's heave and
+#: pitch, with a stiff pitch mode (47 1/s, |lambda| dt = 4.7 at 10 Hz), where a trapezoidal
+#: one-step integral of the term is 17 % off (nonlinear: 1.5 %).
+CASES = [("usv", ("phi",), [1e-8, 1e-7, 1e-8, 1e-7, 1e-8], "p", 2e-4, 1e-6),
+         ("hydrofoil", ("xi", "theta"), [1e-5, 1e-5, 1e-3, 1e-3], "theta_dot", 0.2, 0.03)]
 
 
 def _run(model, recording, channels, q, target: str, b: float):
@@ -28,9 +29,9 @@ def _run(model, recording, channels, q, target: str, b: float):
     return ekf, ekf.filter(recording.inputs, recording.measurements)
 
 
-@pytest.mark.parametrize(("name", "channels", "q", "target", "b"), CASES)
+@pytest.mark.parametrize(("name", "channels", "q", "target", "b", "share"), CASES)
 def test_a_missing_term_changes_the_innovations_as_the_sensitivity_says(name, channels, q,
-                                                                         target, b):
+                                                                         target, b, share):
     model = get_model(name)
     recording = synthesize(model, seed=3, noise=0.05, duration=60, measured=channels)
     ekf, nominal = _run(model, recording, channels, q, target, 0.0)
@@ -43,7 +44,7 @@ def test_a_missing_term_changes_the_innovations_as_the_sensitivity_says(name, ch
     _, shifted = _run(model, recording, channels, q, target, b)  # the model with the term in it
     nu_b = (innovations.L_inv @ shifted.innovation[:, 0, :, None])[:, :, 0]
     assert np.abs(g).max() > 0.5  # the channels see it
-    np.testing.assert_allclose(nu_b, nu - b * g, atol=0.03 * np.abs(b * g).max())
+    np.testing.assert_allclose(nu_b, nu - b * g, atol=share * np.abs(b * g).max())
     shift = innovations.smoothed_shift(b * w[:, :, 0])
     assert np.all(np.isfinite(shift)) and np.abs(shift).max() > 0
 

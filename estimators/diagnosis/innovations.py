@@ -103,9 +103,8 @@ class Innovations:
             if AR_ORDER else None
         P = run.P[:, 0, :n, :n]
         C = np.linalg.solve(P_pred[1:], Phi @ P[:-1]).transpose(0, 2, 1)
-        # about the states each prediction started from; the trapezoid dt (Phi + I) / 2 is
-        # 2.4x too large for the hydrofoil's pitch (|lambda| dt = 4.7 at 10 Hz): a pitch
-        # damping fitted through it came out at 31 % of the truth
+        # exact for a stiff mode: the trapezoid dt (Phi + I) / 2 is 2.4x too large for the
+        # hydrofoil's pitch, and a pitch damping fitted through it came out at 31 % of the truth
         Gamma = ekf.held_input_response(run.x[:-1, 0], u[:-1])
         out = cls(nu=nu, M=Phi @ IKH, Gamma=Gamma, PhiK=Phi @ K[:-1],
                   H=L_inv @ H, L_inv=L_inv, K=K, H_raw=H, Phi=Phi, C=C, ar=ar,
