@@ -126,11 +126,11 @@ def typical_effect(model: str, effect: str, target: str, *, strength: float = 0.
     ``against="model"``, of the nominal model's own ``x_dot[target]`` without the sea (for a
     vehicle whose accelerations are a near balance of large forces, such as the hydrofoil's
     foil lift against the sea's, the terms a model would get wrong). Input effects:
-    a gain of ``1 - strength``, a delay of ``strength`` times the dominant closed-loop time
-    scale, limits at ``2 * (1 - strength)`` standard deviations of the command, a dead zone of
-    ``strength`` standard deviations, a rate limit at ``1 - strength`` of the command's rate
-    spread. A parameter change happens at 55 % of the record. ``extra`` sets ``source``,
-    ``expression``, ``what``, ``form`` or any parameter outright.
+    a gain of ``1 - strength``, a delay of ``strength`` times 2 s (an actuator's dead time, the
+    same on every vehicle), limits at ``2 * (1 - strength)`` standard deviations of the
+    command, a dead zone of ``strength`` standard deviations, a rate limit at ``1 - strength``
+    of the command's rate spread. A parameter change happens at 55 % of the record. ``extra``
+    sets ``source``, ``expression``, ``what``, ``form`` or any parameter outright.
     """
     if against not in ("acceleration", "model"):
         raise ValueError(f"against={against!r}: size state terms against 'acceleration' or "
