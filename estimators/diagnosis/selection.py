@@ -338,8 +338,9 @@ def _refined_change(res: Residuals, evaluator: Evaluator, accepted: list[Fitted]
     """A change time refined to one sample, about the best grid time (``search``: the
     ranking's candidates) or over the whole grid's span (a finding: where the state a damping
     change acts through is quiet the grid times fit alike, and the truth may be a dip narrower
-    than the grid's spacing beside them), :data:`FINE_TIMES` times at a pass. Its std from
-    where the sum of squares rises by one residual variance."""
+    than the grid's spacing beside them), :data:`FINE_TIMES` times at a pass. Its std spans
+    the times of every pass whose sum of squares is within two residual variances of the
+    best."""
     times = np.asarray(family.details["times"])
     best = int(np.argmin(coarse))
     spacing = float(times[1] - times[0]) if len(times) > 1 else res.dt * 10
