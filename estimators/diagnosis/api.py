@@ -396,7 +396,10 @@ def _validate(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
         "improvement": round(selection.combined_improvement, 4),
         "validation": (f"held-out last {1 - ro.fit_fraction:.0%}, findings refitted on the "
                        f"rest: {ro.steps}-step ({ro.steps * ro.res.dt:.1f} s) predictions from "
-                       "the smoothed state, error in excess of the sensor noise"),
+                       "the smoothed state, error in excess of the sensor noise" + "".join(
+                           f"; {e.effect}:{e.target} on the smoothed states (it reads states "
+                           "the model cannot predict over the horizon)"
+                           for e in effects if not ro.carries(e))),
         "expected_from_sea": round(ro.sea_share(before), 4),
         "terms": [{"effect": s.fitted.effect.effect, "target": s.fitted.effect.target,
                    "improvement": s.alone} for s in selection.findings],

@@ -39,6 +39,10 @@ GRID_POINTS = 25
 #: commands have a single rate).
 ANGLE_RATES = np.radians((1.0, 30.0))
 SLEW_FRACTIONS = (0.03, 1.0)
+#: The span of a dead zone's width, as shares of the commands it swallows: up to nearly all (a
+#: wide dead zone under a controller that keeps its commands small holds most of them; at 60 %
+#: the hydrofoil's flap, 84 % inside, was fitted as a lower gain).
+DEADZONE_SHARES = (0.02, 0.95)
 
 
 def rate_limit_grid(unit: str, slew: float, points: int) -> FloatArray:
@@ -214,7 +218,7 @@ def input_families(res: Residuals) -> Iterator[Family]:
         grids = {
             "input_delay": ("tau", dt * np.arange(1, max(2, int(round(3.0 / dt))) + 1)),
             "input_saturation": ("limit", np.quantile(magnitude, levels)),
-            "input_deadzone": ("width", np.quantile(magnitude, np.linspace(0.02, 0.6,
+            "input_deadzone": ("width", np.quantile(magnitude, np.linspace(*DEADZONE_SHARES,
                                                                             GRID_POINTS))),
             "input_rate_limit": ("rate", rate_limit_grid(model.input_units[j], float(
                 np.max(np.abs(np.diff(c)))) / dt, GRID_POINTS)),

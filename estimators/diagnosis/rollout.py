@@ -5,6 +5,13 @@ the measured channels a few seconds ahead with the recorded inputs. A missing te
 over the horizon while sensor noise does not, and a term in an unmeasured state's equation shows
 in the channels it drives, so these predictions both fit the candidates' parameters (free of the
 smoothing bias of the equation errors) and score them on held-out start times.
+
+A term that reads states the nominal model cannot predict over the horizon (a ROV's sway and
+yaw rates, whose 3-s prediction errors are 4x their spread) would carry their prediction
+errors, not itself, into the test: the true ``35 v r`` in a ROV's surge made its surge
+predictions 6 times worse. Each state term is therefore either predicted in the loop or
+evaluated on the smoothed states (what it adds along the record, as the innovations see it),
+whichever predicts the first part of the record, where the findings are fitted, better.
 """
 
 from __future__ import annotations
@@ -14,7 +21,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from marine_envs.models.effects import Effect, EffectModel
+from marine_envs.models.effects import Effect, EffectModel, state_term
 from marine_envs.models.integrate import rk4
 
 from .residuals import Residuals, model_noise_spread
@@ -47,6 +54,7 @@ class Rollouts:
         self.channel_index = [model.output_names.index(c) for c in residuals.channels]
         self._outputs_are_states = model.output_names == model.state_names
         self.target = residuals.y[starts[:, None] + np.arange(1, self.steps + 1)]  # (S, H, m)
+        self._carried: dict[str, bool] = {}
         nominal = self.predict([])
         self.weights = 1 / np.maximum(np.var((self.target - nominal)[self.fit], axis=(0, 1)),
                                       1e-300)
@@ -67,26 +75,71 @@ class Rollouts:
         with np.errstate(over="ignore", invalid="ignore"):  # a wild trial value may overflow
             return self._predict(effects, forcing, shift)
 
+    def carries(self, effect: Effect) -> bool:
+        """Whether ``effect``'s state term is predicted in the loop (the model with it) or
+        evaluated on the smoothed states: whichever predicts the first part's channels better
+        (module doc; a damping mends the very drift it reads, a product of two drifting states
+        multiplies it). Input and sensor effects read no state."""
+        if effect.kind != "state" or effect.effect in ("current", "wave_frequency"):
+            return True
+        key = repr(effect)
+        if key not in self._carried:
+            model = self.res.model
+            with np.errstate(over="ignore", invalid="ignore"):
+                looped = self._run(EffectModel(model, [effect]), {}, None, None)[0]
+                frozen = self._run(EffectModel(model, []), {}, self._frozen([effect], None),
+                                   None)[0]
+            self._carried[key] = bool(self._fit_error(looped) <= self._fit_error(frozen))
+        return self._carried[key]
+
+    def _fit_error(self, predicted: FloatArray) -> float:
+        r = (self.target - predicted)[self.fit]
+        return float(np.sum(r * r * self.weights))
+
     def _predict(self, effects: Sequence[Effect], forcing: Mapping[int, FloatArray] | None,
                  shift: FloatArray | None) -> FloatArray:
+        kept = [k for k, e in enumerate(effects) if self.carries(e)]
+        truth = EffectModel(self.res.model, [effects[k] for k in kept])
+        forcing = {kept.index(k): f for k, f in (forcing or {}).items()}  # never frozen
+        frozen = self._frozen([e for k, e in enumerate(effects) if k not in kept], shift)
+        return self._run(truth, forcing, frozen, shift)[0]
+
+    def _run(self, truth: EffectModel, forcing: Mapping[int, FloatArray],
+             frozen: FloatArray | None, shift: FloatArray | None
+             ) -> tuple[FloatArray, FloatArray]:
+        """Predicted channels ``(S, H, m)`` and states ``(S, H, n)`` of ``truth`` plus the
+        ``frozen`` terms ``(T, n)``."""
         res, model = self.res, self.res.model
-        truth = EffectModel(model, effects)
         u = truth.applied_inputs(res.u, res.dt)
         x = res.x[self.starts] + (0.0 if shift is None else shift[self.starts])
         out = np.empty((len(self.starts), self.steps, len(res.channels)))
+        states = np.empty((len(self.starts), self.steps, len(model.state_names)))
         h = res.dt / res.substeps
         for j in range(self.steps):
             k = self.starts + j
-            w = {i: f[k] for i, f in (forcing or {}).items()}
-            uk = u[k]
-            def f(z, s, uk=uk, w=w):
-                return truth.rhs(z, uk, None, s, w)
+            w = {i: f[k] for i, f in forcing.items()}
+            uk, added = u[k], 0.0 if frozen is None else frozen[k]
+            def f(z, s, uk=uk, w=w, added=added):
+                return truth.rhs(z, uk, None, s, w) + added
 
             for m in range(res.substeps):
                 x = rk4(f, x, h, t=res.time[k] + m * h)
+            states[:, j] = x
             outputs = x if self._outputs_are_states else model.output(x)
             out[:, j] = truth.measure(outputs[:, self.channel_index], res.channels)
-        return np.clip(np.nan_to_num(out, nan=DIVERGED), -DIVERGED, DIVERGED)
+        return np.clip(np.nan_to_num(out, nan=DIVERGED), -DIVERGED, DIVERGED), states
+
+    def _frozen(self, effects: Sequence[Effect], shift: FloatArray | None) -> FloatArray | None:
+        """The state terms of ``effects`` on the (shifted) smoothed states ``(T, n)``."""
+        if not effects:
+            return None
+        res, model = self.res, self.res.model
+        x = res.x + (0.0 if shift is None else shift)
+        added = np.zeros_like(res.x)
+        for effect in effects:
+            added[:, model.state_names.index(effect.target)] += state_term(
+                effect, model, x, res.u, res.time)
+        return added
 
     def errors(self, effects: Sequence[Effect],
                forcing: Mapping[int, FloatArray] | None = None,
