@@ -397,8 +397,8 @@ def _validate(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
         "validation": (f"held-out last {1 - ro.fit_fraction:.0%}, findings refitted on the "
                        f"rest: {ro.steps}-step ({ro.steps * ro.res.dt:.1f} s) predictions from "
                        "the smoothed state, error in excess of the sensor noise" + "".join(
-                           f"; {e.effect}:{e.target} on the smoothed states (it reads states "
-                           "the model cannot predict over the horizon)"
+                           f"; {e.effect}:{e.target} evaluated on the smoothed states (in "
+                           "the loop it predicted the first part worse)"
                            for e in effects if not ro.carries(e))),
         "expected_from_sea": round(ro.sea_share(before), 4),
         "terms": [{"effect": s.fitted.effect.effect, "target": s.fitted.effect.target,
