@@ -86,9 +86,9 @@ class Rollouts:
         if key not in self._carried:
             model = self.res.model
             with np.errstate(over="ignore", invalid="ignore"):
-                looped = self._run(EffectModel(model, [effect]), {}, None, None)[0]
+                looped = self._run(EffectModel(model, [effect]), {}, None, None)
                 frozen = self._run(EffectModel(model, []), {}, self._frozen([effect], None),
-                                   None)[0]
+                                   None)
             self._carried[key] = bool(self._fit_error(looped) <= self._fit_error(frozen))
         return self._carried[key]
 
@@ -102,18 +102,16 @@ class Rollouts:
         truth = EffectModel(self.res.model, [effects[k] for k in kept])
         forcing = {kept.index(k): f for k, f in (forcing or {}).items()}  # never frozen
         frozen = self._frozen([e for k, e in enumerate(effects) if k not in kept], shift)
-        return self._run(truth, forcing, frozen, shift)[0]
+        return self._run(truth, forcing, frozen, shift)
 
     def _run(self, truth: EffectModel, forcing: Mapping[int, FloatArray],
-             frozen: FloatArray | None, shift: FloatArray | None
-             ) -> tuple[FloatArray, FloatArray]:
-        """Predicted channels ``(S, H, m)`` and states ``(S, H, n)`` of ``truth`` plus the
-        ``frozen`` terms ``(T, n)``."""
+             frozen: FloatArray | None, shift: FloatArray | None) -> FloatArray:
+        """Predicted channels ``(S, H, m)`` of ``truth`` plus the ``frozen`` terms
+        ``(T, n)``."""
         res, model = self.res, self.res.model
         u = truth.applied_inputs(res.u, res.dt)
         x = res.x[self.starts] + (0.0 if shift is None else shift[self.starts])
         out = np.empty((len(self.starts), self.steps, len(res.channels)))
-        states = np.empty((len(self.starts), self.steps, len(model.state_names)))
         h = res.dt / res.substeps
         for j in range(self.steps):
             k = self.starts + j
@@ -124,10 +122,9 @@ class Rollouts:
 
             for m in range(res.substeps):
                 x = rk4(f, x, h, t=res.time[k] + m * h)
-            states[:, j] = x
             outputs = x if self._outputs_are_states else model.output(x)
             out[:, j] = truth.measure(outputs[:, self.channel_index], res.channels)
-        return np.clip(np.nan_to_num(out, nan=DIVERGED), -DIVERGED, DIVERGED), states
+        return np.clip(np.nan_to_num(out, nan=DIVERGED), -DIVERGED, DIVERGED)
 
     def _frozen(self, effects: Sequence[Effect], shift: FloatArray | None) -> FloatArray | None:
         """The state terms of ``effects`` on the (shifted) smoothed states ``(T, n)``."""
