@@ -7,6 +7,7 @@ from estimators.diagnosis import api, diagnose, read_params
 from estimators.diagnosis.cases import PARTIAL, Case, build_effect, run_case
 from estimators.diagnosis.residuals import estimate
 from estimators.diagnosis.rollout import Rollouts
+from estimators.diagnosis.selection import _time_posterior
 from estimators.diagnosis.synthetic import synthesize, typical_effect
 from marine_envs.models import get_model
 from marine_envs.models.effects import Effect
@@ -131,6 +132,22 @@ def test_a_damping_change_is_timed_to_a_second_though_the_damped_yaw_then_falls_
     top = diagnosis.findings[0]
     assert (top.effect, top.target) == ("parameter_change", "r")
     assert abs(top.parameters["time"] - effect.parameters["time"]) < 1.0, top.parameters
+
+
+def test_a_change_time_the_record_cannot_date_is_the_middle_of_what_it_allows():
+    # the yaw rate is quiet from 150 s to 190 s: every time between fits alike, and the noise
+    # puts the best one at 188 s; the estimate is the middle, its std the stretch
+    rng = np.random.default_rng(0)
+    times = np.arange(100.0, 231.0)
+    quiet = (times >= 150) & (times <= 190)
+    sse = 1000 + np.where(quiet, rng.uniform(0, 1, times.size), 50.0)
+    sse[times == 188] = 999.0
+    low, median, high = _time_posterior(times, sse, sigma2=1.0)
+    assert 165 <= median <= 175 and 20 <= high - low <= 35
+    # a sharp minimum dates the change to it
+    times = np.arange(100.0, 231.0, 0.1)
+    low, median, high = _time_posterior(times, 1000 + 20 * np.abs(times - 165.0), sigma2=1.0)
+    assert median == pytest.approx(165.0, abs=0.2) and high - low < 0.5
 
 
 def test_a_model_its_findings_cannot_mend_is_refused_naming_them(monkeypatch):

@@ -12,7 +12,14 @@ from .residuals import Residuals
 def explain(effect: Effect, scored: Any, residuals: Residuals) -> str:
     """One or two sentences a marine engineer can act on."""
     share = f"it removes {scored.alone:.0%} of the held-out prediction error beyond sensor noise"
-    return f"{describe(effect)}; {share}."
+    return f"{describe(effect)}{_dating(effect, scored)}; {share}."
+
+
+def _dating(effect: Effect, scored: Any) -> str:
+    """How closely the record dates a change (the 68 % interval of its time's posterior)."""
+    spread = scored.fitted.std.get("time", 0.0) if effect.effect == "parameter_change" else 0.0
+    return f" (give or take {spread:.0f} s: the record cannot date it closer)" \
+        if spread >= 1.0 else ""
 
 
 def describe(effect: Effect) -> str:

@@ -338,9 +338,9 @@ def _refined_change(res: Residuals, evaluator: Evaluator, accepted: list[Fitted]
     """A change time refined to one sample, about the best grid time (``search``: the
     ranking's candidates) or over the whole grid's span (a finding: where the state a damping
     change acts through is quiet the grid times fit alike, and the truth may be a dip narrower
-    than the grid's spacing beside them), :data:`FINE_TIMES` times at a pass. Its std spans
-    the times of every pass whose sum of squares is within two residual variances of the
-    best."""
+    than the grid's spacing beside them), :data:`FINE_TIMES` times at a pass. The time is the
+    median of its posterior over every pass (:func:`_time_posterior`), its std half the
+    posterior's central 68 %."""
     times = np.asarray(family.details["times"])
     best = int(np.argmin(coarse))
     spacing = float(times[1] - times[0]) if len(times) > 1 else res.dt * 10
@@ -348,27 +348,55 @@ def _refined_change(res: Residuals, evaluator: Evaluator, accepted: list[Fitted]
         else (times[0], times[-1])
     what = family.members[best]["what"]
     n_rows = int(rows.sum()) if rows is not None else len(evaluator.nu)
-    tried, fits = [], []  # every pass's times and sums of squares, for the std
+    tried, fits = [], []  # every pass's times and sums of squares, for the posterior
     while True:
         step = max(res.dt, (high - low) / FINE_TIMES)
         fine = np.arange(low, high + step / 2, step)
         fine = fine[(fine > res.time[0]) & (fine < res.time[-1])]
-        local = next(f for f in change_families(res, times=fine, target=family.target)
-                     if f.members[0]["what"] == what)
-        G = res.innovations.response(local.w, local.v)  # type: ignore[union-attr]
-        sse, coef, _ = evaluator.fit(accepted, G, True, rows)
+        sse = _change_fit(res, evaluator, accepted, family.target, what, fine, rows)[0]
         k = int(np.argmin(sse))
         tried.append(fine)
         fits.append(sse)
         if step <= res.dt * 1.001:
             break
         low, high = fine[k] - step, fine[k] + step
-    sigma2 = max(float(sse[k]), 1e-300) / max(n_rows * evaluator.nu.shape[1], 1)
     all_sse = np.concatenate(fits)
-    within = np.concatenate(tried)[all_sse <= sse[k] + sigma2 * 2]
-    std = {"time": float(max((within.max() - within.min()) / 2, res.dt)),
-           "c": float(abs(coef[k]) / math.sqrt(max((all_sse.max() - sse[k]) / sigma2, 1.0)))}
-    return _fitted(res, local, k, float(coef[k]), G[:, :, k] * coef[k], std)
+    sigma2 = max(float(all_sse.min()), 1e-300) / max(n_rows * evaluator.nu.shape[1], 1)
+    low, median, high = _time_posterior(np.concatenate(tried), all_sse, sigma2)
+    time = res.time[int(np.argmin(np.abs(res.time - median)))]
+    sse, coef, G, local = _change_fit(res, evaluator, accepted, family.target, what,
+                                      np.array([time]), rows)
+    std = {"time": float(max((high - low) / 2, res.dt)),
+           "c": float(abs(coef[0]) / math.sqrt(max((all_sse.max() - sse[0]) / sigma2, 1.0)))}
+    return _fitted(res, local, 0, float(coef[0]), G[:, :, 0] * coef[0], std)
+
+
+def _change_fit(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], target: str,
+                what: str, times: FloatArray, rows: BoolArray | None
+                ) -> tuple[FloatArray, FloatArray, FloatArray, Family]:
+    """Sums of squares, coefficients and responses of a ``what`` change at each of ``times``,
+    and its family."""
+    local = next(f for f in change_families(res, times=times, target=target)
+                 if f.members[0]["what"] == what)
+    G = res.innovations.response(local.w, local.v)  # type: ignore[union-attr]
+    sse, coef, _ = evaluator.fit(accepted, G, True, rows)
+    return sse, coef, G, local
+
+
+def _time_posterior(times: FloatArray, sse: FloatArray, sigma2: float
+                    ) -> tuple[float, float, float]:
+    """The 16 %, 50 % and 84 % points of a change time's posterior: a flat prior over the
+    times tried, the Gaussian likelihood ``exp(-(SSE - min) / 2 sigma2)`` between them.
+    Where the state the change acts through is quiet, the times across the quiet stretch fit
+    alike and the best of them is a guess; the median is the estimate of least expected
+    absolute error."""
+    t, first = np.unique(times, return_index=True)
+    density = np.exp(-(sse[first] - sse.min()) / (2 * sigma2))
+    mass = np.concatenate([[0.0], np.cumsum((density[1:] + density[:-1]) / 2 * np.diff(t))])
+    if mass[-1] <= 0:  # one time tried
+        return float(t[0]), float(t[0]), float(t[0])
+    low, median, high = np.interp(np.array([0.16, 0.5, 0.84]) * mass[-1], mass, t)
+    return float(low), float(median), float(high)
 
 
 def _parabola(values: FloatArray, sse: FloatArray, r: int,
