@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
+from scipy.integrate import cumulative_trapezoid
 
 from marine_envs.models.effects import Effect
 
@@ -392,7 +393,7 @@ def _time_posterior(times: FloatArray, sse: FloatArray, sigma2: float
     absolute error."""
     t, first = np.unique(times, return_index=True)
     density = np.exp(-(sse[first] - sse.min()) / (2 * sigma2))
-    mass = np.concatenate([[0.0], np.cumsum((density[1:] + density[:-1]) / 2 * np.diff(t))])
+    mass = cumulative_trapezoid(density, t, initial=0.0)
     if mass[-1] <= 0:  # one time tried
         return float(t[0]), float(t[0]), float(t[0])
     low, median, high = np.interp(np.array([0.16, 0.5, 0.84]) * mass[-1], mass, t)
