@@ -304,6 +304,17 @@ def format_confusion(table: dict[str, dict[str, int]]) -> str:
     return "\n".join(lines)
 
 
+def format_named(outcomes: Sequence[Outcome]) -> str:
+    """How often a miss at least named the truth: the true effects among the findings or
+    among the terms reported as supported equally well (not an acceptance rate)."""
+    effects = [o for o in outcomes if o.true]
+    named = [o for o in effects
+             if all(t in o.found[:len(o.true)] or t in o.alternatives for t in o.true)]
+    beside = sum(not o.ranked_right for o in named)
+    return (f"info  true effects found or named as equally supported: {len(named)} of "
+            f"{len(effects)} ({beside} of them only as an alternative to the top finding)")
+
+
 def format_acceptance(summary: dict[str, dict[str, Any]], time_row: dict | None) -> str:
     labels = {"right": "right: effect, target, key parameter",
               "ranked_right": "ranked right (cases with effects)",
@@ -423,6 +434,7 @@ def main() -> int:
     summary = summarize(accepted)
     print(f"Per vehicle:\n{format_per_vehicle(accepted)}\n")
     print(format_acceptance(summary, time_row))
+    print(format_named(accepted))
     print(f"\n{len(cases)} cases in {time.perf_counter() - start:.0f} s")
     passed = all(r["passed"] for r in summary.values()) and (time_row or {}).get("passed", True)
     if args.json:

@@ -5,9 +5,11 @@ import pytest
 
 from estimators.diagnosis import api, diagnose, read_params
 from estimators.diagnosis.cases import PARTIAL, Case, build_effect, run_case
+from estimators.diagnosis.hypotheses import Family
+from estimators.diagnosis.report import markdown
 from estimators.diagnosis.residuals import estimate
 from estimators.diagnosis.rollout import Rollouts
-from estimators.diagnosis.selection import _time_posterior
+from estimators.diagnosis.selection import Scored, _time_posterior, encompassing, rivals
 from estimators.diagnosis.synthetic import synthesize, typical_effect
 from marine_envs.models import get_model
 from marine_envs.models.effects import Effect
@@ -148,6 +150,45 @@ def test_a_change_time_the_record_cannot_date_is_the_middle_of_what_it_allows():
     times = np.arange(100.0, 231.0, 0.1)
     low, median, high = _time_posterior(times, 1000 + 20 * np.abs(times - 165.0), sigma2=1.0)
     assert median == pytest.approx(165.0, abs=0.2) and high - low < 0.5
+
+
+def _candidate(gain: float, residual: np.ndarray | None, n_parameters: int = 1) -> Scored:
+    family = Family("linear_damping", "r", [{}], n_parameters=n_parameters)
+    return Scored(family, None, 0.0, gain, 0.0, 1e-6, residual=residual)  # type: ignore[arg-type]
+
+
+def test_the_term_that_explains_what_its_look_alike_leaves_wins_and_true_twins_are_named():
+    # innovations = a true term's signal + white noise; the look-alike removes 90 % of the
+    # signal but its cross-validated gain came out larger; a twin differs from the truth by
+    # less than the noise can show
+    rng = np.random.default_rng(3)
+    T = 3000
+    signal = 1.5 * np.sin(np.arange(T) / 30.0)[:, None]
+    noise = rng.standard_normal((T, 1))
+    truth = _candidate(100.0, noise)
+    look_alike = _candidate(101.0, noise + 0.1 * signal)
+    twin = _candidate(99.0, noise - 0.01 * rng.standard_normal((T, 1)))
+    unsupported = _candidate(98.0, None)  # not significant: never a rival
+    scored = [look_alike, truth, twin, unsupported]
+    best = encompassing(look_alike, scored, block=20, alpha=0.01)
+    assert best is truth
+    assert rivals(best, scored, block=20, alpha=0.01) == [twin]
+    # a richer family (a change point nests the constant term) does not unseat a simpler one
+    richer = _candidate(100.0, noise, n_parameters=2)
+    assert encompassing(look_alike, [look_alike, richer], block=20, alpha=0.01) is look_alike
+
+
+def test_damping_laws_one_record_cannot_tell_apart_are_named_with_the_test_that_would():
+    truth = build_effect("usv", ("quadratic_damping", "r", {}), seed=0)
+    diagnosis = diagnose(Case("usv", (truth,), 0.10, 0).recording())
+    top = diagnosis.findings[0]
+    assert (top.effect, top.target) == ("quadratic_damping", "r")
+    cubic = next(a for a in diagnosis.to_dict()["alternatives"]
+                 if a["equally"] == "nonlinear_damping(r)")
+    assert cubic["chosen"] == "quadratic_damping(r)" and cubic["parameters"]["c"] < 0
+    assert "larger amplitude of r" in cubic["separate_by"]
+    assert "nonlinear_damping(r) (form=cubic, c=" in diagnosis.summary()
+    assert "(reported) or `nonlinear_damping(r)` (form = cubic, c = -" in markdown(diagnosis)
 
 
 def test_a_model_its_findings_cannot_mend_is_refused_naming_them(monkeypatch):

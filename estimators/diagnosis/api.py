@@ -30,9 +30,9 @@ from marine_envs.models import MeasuredDisturbances, VehicleModel, get_model
 from marine_envs.models.effects import Effect
 from marine_envs.recording import Recording, read_recording
 
-from .explain import explain
+from .explain import explain, separating_test
 from .model_test import diagnose_series
-from .output_error import parameter_bounds
+from .output_error import parameter_bounds, term_label
 from .residuals import Residuals, estimate, white_noise_std
 from .result import Diagnosis, Finding
 from .rollout import Rollouts
@@ -41,6 +41,7 @@ from .selection import (
     Evaluator,
     Fitted,
     Scored,
+    Selection,
     fit_findings,
     gain_test,
     select,
@@ -144,6 +145,7 @@ def _seaway(recordings: Sequence[Recording], vehicle: VehicleModel, calibrate: S
     _locate(diagnosis)
     _validate(diagnosis, config)
     _confirm(diagnosis, config)
+    diagnosis.alternatives = _alternatives(selection)
     if nominal > WORSE_THAN_HOLDING:
         assert selection.validated_errors is not None
         mended = _worse_than_holding(rollouts, selection.validated_errors, rollouts.held)
@@ -433,6 +435,18 @@ def _confirm(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
     diagnosis.findings = [f for k, f in enumerate(diagnosis.findings) if k not in withdrawn]
     diagnosis.mismatch = bool(diagnosis.findings)
     _validate(diagnosis, config)
+
+
+def _alternatives(selection: Selection) -> list[dict[str, Any]]:
+    """Per finding, the other terms the record supports as well (its search round's rivals,
+    :func:`.selection.rivals`), with their fitted parameters and a test that would separate
+    them."""
+    found = {s.family.key for s in selection.findings}
+    return [{"chosen": term_label(s.effect), "equally": term_label(r.effect),
+             "effect": r.effect.effect, "target": r.effect.target,
+             "parameters": dict(r.effect.parameters),
+             "separate_by": separating_test(s.effect, r.effect)}
+            for s in selection.findings for r in s.rivals if r.family.key not in found]
 
 
 def findings_model(res: Residuals, fitted: Sequence[Fitted]

@@ -167,6 +167,7 @@ class Outcome:
     :param improvement: the held-out fractional improvement of the combined findings.
     :param seconds: wall time of the diagnosis, s.
     :param parameters: each finding's fitted parameters, in rank order (SI units).
+    :param alternatives: terms the record supports as well as a finding, ``"effect:target"``.
     """
 
     case: str
@@ -182,6 +183,7 @@ class Outcome:
     seconds: float
     reason: str = ""
     parameters: list[dict[str, Any]] = field(default_factory=list)
+    alternatives: list[str] = field(default_factory=list)
 
 
 def label(effect: str, target: str) -> str:
@@ -277,7 +279,8 @@ def score(case: Case, diagnosis: Diagnosis, seconds: float) -> Outcome:
                 true=[label(e.effect, e.target) for e in case.effects],
                 found=[label(f.effect, f.target) for f in findings], confidences=confidences,
                 improvement=improvement, seconds=seconds, reason=diagnosis.reason,
-                parameters=[dict(f.parameters) for f in findings])
+                parameters=[dict(f.parameters) for f in findings],
+                alternatives=[label(a["effect"], a["target"]) for a in diagnosis.alternatives])
     if not case.effects:
         alarm = any(c >= CONFIDENT for c in confidences)
         return Outcome(**base, ranked_right=not alarm, parameter_ok=None, improvement_ok=None,

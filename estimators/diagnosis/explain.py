@@ -22,6 +22,26 @@ def _dating(effect: Effect, scored: Any) -> str:
         if spread >= 1.0 else ""
 
 
+_DAMPING = {"linear_damping", "quadratic_damping", "nonlinear_damping"}
+
+
+def separating_test(a: Effect, b: Effect) -> str:
+    """A test that would tell two terms apart that one record cannot."""
+    kinds = {a.effect, b.effect}
+    if kinds <= _DAMPING:
+        return (f"a test at a larger amplitude of {a.target}: x, x|x| and x^3 damping agree over "
+                "the amplitudes recorded and part beyond them")
+    if "sensor_bias" in kinds or "current" in kinds:
+        return "a record with another mean: a sensor offset stays, a steady force changes it"
+    if "parameter_change" in kinds:
+        return ("a second record: a change happens once, at a time; a missing term acts "
+                "whenever its state is excited")
+    if any(k.startswith("input_") for k in kinds):
+        return ("steps of the input of several sizes and rates: an actuator effect shapes "
+                "what the vessel receives, a hull term how it responds")
+    return "a test that excites the two terms differently (another amplitude or input)"
+
+
 def describe(effect: Effect) -> str:
     """What the effect means for the vehicle, with its numbers."""
     p, t = effect.parameters, effect.target

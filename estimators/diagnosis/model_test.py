@@ -24,7 +24,7 @@ from marine_envs.models.effects import Effect
 from marine_envs.recording import Recording
 
 from .comparison import Comparison, ComparisonConfig, HeldOut, Scored, compare
-from .explain import describe
+from .explain import describe, separating_test
 from .modes import check_modes, free_decays, mode_start
 from .output_error import Fit, Series, term_label
 from .result import Diagnosis, Finding
@@ -232,19 +232,9 @@ def _alternatives(comparison: Comparison) -> list[dict[str, Any]]:
         if chosen is None:
             continue
         out += [{"chosen": chosen.candidate.label, "equally": other.candidate.label,
-                 "separate_by": _separating_test(chosen.candidate.term, other.candidate.term)}
+                 "separate_by": separating_test(chosen.candidate.term, other.candidate.term)}
                 for other in round_ if other is not chosen and _equal(comparison, chosen, other)]
     return out
-
-
-def _separating_test(a: Effect, b: Effect) -> str:
-    kinds = {a.effect, b.effect}
-    if kinds <= {"quadratic_damping", "nonlinear_damping", "linear_damping"}:
-        return (f"a test at a larger amplitude of {a.target}: x|x| and x^3 damping agree over "
-                "the amplitudes recorded and part beyond them")
-    if "sensor_bias" in kinds or "current" in kinds:
-        return "a record with another mean: a sensor offset stays, a steady force changes it"
-    return "a test that excites the two terms differently (another amplitude or input)"
 
 
 def _channels(nominal: HeldOut) -> list[dict[str, Any]]:

@@ -99,7 +99,8 @@ def markdown(diagnosis: Diagnosis, figures: Sequence[tuple[str, str]] = (),
     if diagnosis.mismatch is None:
         return "\n".join(parts)
     parts += _calibration(diagnosis) + _location(diagnosis) + _findings(diagnosis.findings) \
-        + _withdrawn(diagnosis.unconfirmed) + _fit(diagnosis)
+        + _alternatives(diagnosis.alternatives) + _withdrawn(diagnosis.unconfirmed) \
+        + _fit(diagnosis)
     if figures:
         parts += ["## Figures", ""]
         for name, caption in figures:
@@ -160,6 +161,19 @@ def _findings(findings: Sequence[Finding]) -> list[str]:
     for k, f in enumerate(findings, 1):
         out.append(f"| {k} | {f.effect} | {f.target} | {cell(parameters(f))} | "
                    f"{f.confidence:.2f} | {f.improvement:.0%} | {cell(f.explanation)} |")
+    return out + [""]
+
+
+def _alternatives(alternatives: Sequence[dict[str, Any]]) -> list[str]:
+    """Terms the record supports as well as a finding, and what would separate them."""
+    if not alternatives:
+        return []
+    out = ["Equally supported (neither term predicts what the other leaves; the record cannot "
+           "choose):", ""]
+    for alt in alternatives:
+        values = ", ".join(f"{k} = {num(v)}" for k, v in alt["parameters"].items())
+        out.append(f"- `{alt['chosen']}` (reported) or `{alt['equally']}` ({values}): to "
+                   f"separate them, {alt['separate_by']}.")
     return out + [""]
 
 

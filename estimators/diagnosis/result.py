@@ -146,8 +146,11 @@ class Diagnosis:
             lines.append(f"  unexplained in {channel}: {_with_unit(left['rmse'], left['unit'])}"
                          f" RMS held-out ({left['share_of_signal']:.0%} of the signal)")
         for alt in self.alternatives:
-            lines.append(f"  {alt['equally']} explains the data as well as {alt['chosen']}; "
-                         f"to separate them: {alt['separate_by']}")
+            values = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                               for k, v in alt.get("parameters", {}).items())
+            lines.append(f"  {alt['equally']}{f' ({values})' if values else ''} explains the "
+                         f"data as well as {alt['chosen']}; to separate them: "
+                         f"{alt['separate_by']}")
         return "\n".join(lines + withdrawn)
 
 

@@ -9,9 +9,11 @@ for its freedom, and the whole record validates.
 
 The held-out reduction of the squared innovations is tested over short blocks (a
 self-normalised one-sided z-test, see :func:`gain_test`) and the p-value multiplied by the
-number of families tried (Bonferroni). The best significant family becomes a
-finding and the search repeats with it in the model, until nothing significant is left. The
-findings are then refitted jointly on the whole record (backfitting).
+number of families tried (Bonferroni). The significant family with the largest gain becomes
+a finding, unless a rival with no more parameters explains what it leaves while it does not
+explain the rival's leftovers (:func:`encompassing`); rivals neither explains are reported
+beside it (:func:`rivals`). The search repeats with the finding in the model, until nothing
+significant is left. The findings are then refitted jointly on the whole record (backfitting).
 
 A finding's ``confidence`` is one minus its corrected p-value, times its share of the evidence
 among the significant alternatives (Akaike weights from the held-out log-likelihood gains), so
@@ -104,6 +106,10 @@ class Scored:
     confidence: float = 0.0
     alone: float = 0.0  # validation improvement of this term alone (set by the api)
     held_out_p: float = 0.0  # does it, fitted on the first part, predict the rest? (by the api)
+    #: its held-out innovations ``(T, m)`` while its round is compared (significant ones)
+    residual: FloatArray | None = field(default=None, repr=False)
+    #: significant families of its round the record cannot tell from it (:func:`rivals`)
+    rivals: list[Scored] = field(default_factory=list, repr=False)
 
     @property
     def effect(self) -> Effect:
@@ -232,6 +238,12 @@ def select(residuals: Residuals, config: DiagnosisConfig = DiagnosisConfig()) ->
         # the best *significant* family: a lower-ranked one may be significant when the top
         # one is not (its gain is larger but spread over too few blocks)
         best = next((s for s in scored if s.p_value <= config.alpha and s.gain > 0), None)
+        if best is not None:
+            block = int(round(config.block / residuals.dt))
+            best = encompassing(best, scored, block, config.alpha)
+            best.rivals = rivals(best, scored, block, config.alpha)
+        for s in scored:
+            s.residual = None  # (T, m) each: kept only while the round is compared
         if best is None:
             break
         if best.family.effect == "parameter_change":  # ranked on its best grid time's fit
@@ -273,8 +285,43 @@ def _score(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], before:
     # the description length of the member chosen (which source, delay, time, library term)
     charge = 0.5 * math.log(before.size) * (family.n_parameters - 1) \
         + math.log(len(family.members))
-    return Scored(family, fitted, 1 - a / b, (b - a) / (2 * sigma2) - charge, t,
-                  min(1.0, p * tried))
+    p = min(1.0, p * tried)
+    return Scored(family, fitted, 1 - a / b, (b - a) / (2 * sigma2) - charge, t, p,
+                  residual=after if p <= config.alpha else None)
+
+
+def _explains(a: Scored, b: Scored, block: int, alpha: float) -> bool:
+    """Whether ``a``'s held-out correction significantly predicts what ``b``'s leaves (the
+    search's test, :func:`gain_test`, on ``b``'s held-out innovations)."""
+    return gain_test(b.residual, a.residual, block)[1] <= alpha  # type: ignore[arg-type]
+
+
+def encompassing(best: Scored, scored: list[Scored], block: int, alpha: float) -> Scored:
+    """The significant family that explains what its rivals leave, starting from the largest
+    gain: ``best`` yields to a rival that predicts what ``best`` leaves while ``best`` does not
+    predict what it leaves (the encompassing principle). Gains of look-alike terms differ by
+    less than their noise; which one accounts for the other's misses is the sharper test.
+    Only rivals with no more parameters compete so: a richer family (a change point, which
+    nests the constant term it changes) explains some of anything's leftovers, and the
+    gain's charge for its parameters judges it instead."""
+    for _ in range(len(scored)):
+        challenger = next((s for s in scored if s is not best and s.residual is not None
+                           and s.gain > 0 and s.family.n_parameters <= best.family.n_parameters
+                           and _explains(s, best, block, alpha)
+                           and not _explains(best, s, block, alpha)), None)
+        if challenger is None:
+            break
+        best = challenger
+    return best
+
+
+def rivals(best: Scored, scored: list[Scored], block: int, alpha: float) -> list[Scored]:
+    """The significant families of ``best``'s round that explain the record as well: neither
+    predicts what the other leaves. Damping laws over one range of amplitudes, or a thrust
+    delay and a surge damping, are often such pairs: the record cannot choose, and the user
+    should know it."""
+    return [s for s in scored if s is not best and s.residual is not None and s.gain > 0
+            and not _explains(best, s, block, alpha) and not _explains(s, best, block, alpha)]
 
 
 def fit_member(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], family: Family,
