@@ -10,7 +10,9 @@
 3. Smooth the record with the nominal model; locate the mismatch (channels, time windows,
    frequency band) in its multi-step prediction errors.
 4. Search the catalogue (:mod:`.hypotheses`, :mod:`.selection`) and report each supported effect
-   with its parameters, their standard deviations, a confidence and an explanation.
+   with its parameters, their standard deviations, a confidence and an explanation. When a
+   finding acts on a state no channel measures, smooth again with the findings in the model and
+   search again, until the findings repeat (the nominal smoothing attenuates that state).
 5. Validate: the held-out prediction error before and after adding the findings.
 """
 
@@ -19,6 +21,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -27,13 +30,13 @@ from numpy.typing import NDArray
 from scipy import optimize, signal
 
 from marine_envs.models import MeasuredDisturbances, VehicleModel, get_model
-from marine_envs.models.effects import Effect
+from marine_envs.models.effects import Effect, ModelWithEffects
 from marine_envs.recording import Recording, read_recording
 
 from .explain import explain, separating_test
 from .model_test import diagnose_series
 from .output_error import parameter_bounds, term_label
-from .residuals import Residuals, estimate, white_noise_std
+from .residuals import Residuals, equation_error, estimate, white_noise_std
 from .result import Diagnosis, Finding
 from .rollout import Rollouts
 from .selection import (
@@ -60,6 +63,10 @@ MIN_SIGNAL_TO_NOISE = 3.0
 #: A model whose predictions are this many times (RMS) worse than holding the last sample does
 #: not describe the recording, unless its findings bring them back within.
 WORSE_THAN_HOLDING = 2.0
+#: At most this many searches on states smoothed with the last one's findings
+#: (:func:`_resmoothed`), each a smoothing and a search; a linear roll damping without the
+#: roll rate came out at 50, 86 and 93 % of the truth on the first three.
+RESMOOTHING_PASSES = 3
 
 
 def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path],
@@ -138,6 +145,7 @@ def _seaway(recordings: Sequence[Recording], vehicle: VehicleModel, calibrate: S
     # delay or dead zone), so a model is called wrong only if its findings cannot mend it
     nominal = _worse_than_holding(rollouts, rollouts.errors([]), rollouts.fit)
     selection = select(residuals, config)
+    selection = _resmoothed(recording, residuals, selection, config)
     findings = [_finding(s, residuals) for s in selection.findings]
     diagnosis = Diagnosis(vehicle.name, bool(findings), "", calibration=calibration,
                           calibration_quality=quality, residuals=residuals, rollouts=rollouts,
@@ -361,6 +369,67 @@ def _band(res: Residuals, channel: str | None) -> dict[str, float] | None:
     low = omega[np.searchsorted(cumulative, 0.1)]
     high = omega[min(np.searchsorted(cumulative, 0.9), len(omega) - 1)]
     return {"low": round(float(low), 3), "high": round(float(high), 3)}
+
+
+# -- unmeasured states smoothed with the findings ---------------------------------------------
+def _state_terms(selection: Selection) -> list[Effect]:
+    """The findings a smoother can carry: time-invariant state terms."""
+    return [s.fitted.effect for s in selection.findings if s.fitted.effect.kind == "state"
+            and s.fitted.effect.effect not in ("wave_frequency", "parameter_change")]
+
+
+def _targets(effects: Sequence[Effect], residuals: Residuals) -> set[str]:
+    """The unmeasured states ``effects`` act on."""
+    return {e.target for e in effects if e.target not in residuals.channels}
+
+
+def _resmoothed(recording: Recording, residuals: Residuals, selection: Selection,
+                config: DiagnosisConfig) -> Selection:
+    """Smooth again with the findings in the model and search again, until the findings repeat
+    (an expectation-maximisation iteration). A state no channel measures follows the nominal
+    model in the smoother, which lacks the very term that acts on it; the terms fitted to that
+    state are attenuated (errors in the variables: a roll damping fitted to a nominally
+    smoothed roll rate came out a third of the truth and looked quadratic). The innovations
+    stay the nominal filter's: only the states the terms are functions of change. Validation
+    stays on the nominal smoothing (:func:`_validate` refits the chosen terms there), so the
+    nominal model is not judged from states that already know the findings.
+
+    Only for models whose sensors read states: the DP vessel's position reference reads the
+    sum of its low- and wave-frequency motion, and its velocities come out of the model's own
+    sea model; searched again, 2 of its first 13 tuned cases moved to a wrong term."""
+    model = residuals.model
+    if model.output_names != model.state_names:
+        return selection
+    for _ in range(RESMOOTHING_PASSES):
+        carried = _state_terms(selection)
+        if not _targets(carried, residuals):  # the nominal smoothing follows the data there
+            break
+        try:
+            states = estimate(recording, ModelWithEffects(model, carried))
+        except ValueError:  # SmootherDiverged, or a noise model it left non-finite: a
+            break           # fitted term that destabilises the model; keep the last search
+        candidate = replace(residuals, x=states.x, x_std=states.x_std, error=equation_error(
+            model, states.x, residuals.u, residuals.dt, residuals.substeps))
+        again = select(candidate, config)
+        if not _targets(carried, candidate) <= _targets(_state_terms(again), candidate):
+            break  # not a fixed point: the terms smoothed with are not found again
+        repeated, selection = _repeats(selection, again), again
+        if repeated:
+            break
+    return selection
+
+
+def _repeats(before: Selection, after: Selection, tolerance: float = 0.05) -> bool:
+    """Whether two searches found the same terms with parameters within ``tolerance``."""
+    if [s.family.key for s in before.findings] != [s.family.key for s in after.findings]:
+        return False
+    for a, b in zip(before.findings, after.findings, strict=True):
+        for name, value in a.fitted.effect.parameters.items():
+            other = b.fitted.effect.parameters.get(name)
+            if isinstance(value, int | float) and isinstance(other, int | float) and \
+                    abs(other - value) > tolerance * max(abs(value), 1e-12):
+                return False
+    return True
 
 
 # -- findings and validation ----------------------------------------------------------------------

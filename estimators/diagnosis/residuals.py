@@ -67,6 +67,10 @@ ENVIRONMENT_PASSES = 2
 STEP = 1e-3
 
 
+class SmootherDiverged(ValueError):
+    """The model's filter ran off on the record (non-finite states or innovations)."""
+
+
 @dataclass
 class Residuals:
     """The nominal model's view of a recording.
@@ -223,24 +227,35 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
     forcing: list[Forcing] = []
     for k in range(passes):
         ekf = _filter(model, dt, channels, q, noise, x0, P0, substeps, forcing)
-        smoothed = ekf.smooth(u, y)
-        x = smoothed.x[:, 0, :n]
-        error = equation_error(model, x, u, dt, substeps)
+        with np.errstate(over="ignore", invalid="ignore"):  # checked just below
+            smoothed = ekf.smooth(u, y)
+            x = smoothed.x[:, 0, :n]
+            error = equation_error(model, x, u, dt, substeps)
+            variance = np.maximum(np.var(error, axis=0), 1e-12 * (np.var(x, axis=0) + 1e-12))
+        _check_finite(model, smoothed.x, smoothed.filtered.innovation, variance)
         if k == passes - 1:
             break
-        variance = np.maximum(np.var(error, axis=0), 1e-12 * (np.var(x, axis=0) + 1e-12))
         q = np.where(own, own_q, np.where(measured, variance * dt**2, q * FOLLOW_MODEL))
         if k == passes - 2:
             forcing = forcing_model(model, x, u, error, measured, dt)
+            _check_finite(model, np.array([(f.tau, f.variance) for f in forcing]))
             forced = sorted({i for f in forcing for i in f.equations})
             q[forced] *= WHITE_SHARE
             for _ in range(ENVIRONMENT_PASSES if _split(forcing)[1] else 0):
-                forcing = environment_statistics(model, dt, channels, q, noise, x0, P0,
-                                                 substeps, forcing, u, y)
+                with np.errstate(over="ignore", invalid="ignore"):
+                    forcing = environment_statistics(model, dt, channels, q, noise, x0, P0,
+                                                     substeps, forcing, u, y)
+            _check_finite(model, np.array([(f.tau, f.variance) for f in forcing]))
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
                      error, noise, observable_states(model, channels), substeps,
                      Innovations.from_filter(ekf, smoothed.filtered, u, n),
                      _with_levels(forcing, smoothed.x[:, 0, n + len(forcing):]))
+
+
+def _check_finite(model: VehicleModel, *arrays: FloatArray) -> None:
+    """:raises SmootherDiverged: if any of ``arrays`` (a smoothing's results) is not finite."""
+    if not all(np.isfinite(a).all() for a in arrays):
+        raise SmootherDiverged(f"the {model.name} model's smoother diverged on this record")
 
 
 @dataclass(frozen=True)
