@@ -411,7 +411,7 @@ def _resmoothed(recording: Recording, residuals: Residuals, selection: Selection
         candidate = replace(residuals, x=states.x, x_std=states.x_std, error=equation_error(
             model, states.x, residuals.u, residuals.dt, residuals.substeps))
         again = select(candidate, config)
-        if not _targets(carried, candidate) <= _targets(_state_terms(again), candidate):
+        if not _targets(carried, residuals) <= _targets(_state_terms(again), residuals):
             break  # not a fixed point: the terms smoothed with are not found again
         repeated, selection = _repeats(selection, again), again
         if repeated:

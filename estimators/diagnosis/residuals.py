@@ -68,7 +68,8 @@ STEP = 1e-3
 
 
 class SmootherDiverged(ValueError):
-    """The model's filter ran off on the record (non-finite states or innovations)."""
+    """The model's filter ran off on the record: non-finite states, innovations, equation-error
+    variances or forcing statistics."""
 
 
 @dataclass
@@ -238,18 +239,23 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
         q = np.where(own, own_q, np.where(measured, variance * dt**2, q * FOLLOW_MODEL))
         if k == passes - 2:
             forcing = forcing_model(model, x, u, error, measured, dt)
-            _check_finite(model, np.array([(f.tau, f.variance) for f in forcing]))
+            _check_finite(model, _statistics(forcing))
             forced = sorted({i for f in forcing for i in f.equations})
             q[forced] *= WHITE_SHARE
             for _ in range(ENVIRONMENT_PASSES if _split(forcing)[1] else 0):
                 with np.errstate(over="ignore", invalid="ignore"):
                     forcing = environment_statistics(model, dt, channels, q, noise, x0, P0,
                                                      substeps, forcing, u, y)
-            _check_finite(model, np.array([(f.tau, f.variance) for f in forcing]))
+            _check_finite(model, _statistics(forcing))
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
                      error, noise, observable_states(model, channels), substeps,
                      Innovations.from_filter(ekf, smoothed.filtered, u, n),
                      _with_levels(forcing, smoothed.x[:, 0, n + len(forcing):]))
+
+
+def _statistics(forcing: Sequence[Forcing]) -> FloatArray:
+    """Each forcing's ``(tau, variance)``."""
+    return np.array([(f.tau, f.variance) for f in forcing])
 
 
 def _check_finite(model: VehicleModel, *arrays: FloatArray) -> None:
