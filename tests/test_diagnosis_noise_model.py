@@ -5,11 +5,17 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy import signal
 
 from agents.simulate import simulate
 from estimators.diagnosis import diagnose
-from estimators.diagnosis.cases import Case, build_effect, run_case
-from estimators.diagnosis.hypotheses import _at_natural_frequency, _in_both_halves, _targets
+from estimators.diagnosis.cases import PARTIAL, Case, build_effect, run_case
+from estimators.diagnosis.hypotheses import (
+    _at_natural_frequency,
+    _in_both_halves,
+    _targets,
+    spectral_peak,
+)
 from estimators.diagnosis.residuals import denoised, estimate, model_noise_spread
 from estimators.diagnosis.synthetic import SEA, synthesize, typical_effect
 from marine_envs.models import get_model
@@ -91,6 +97,27 @@ def test_only_an_oscillatory_mode_explains_a_spectral_peak_away():
     assert rings("rov", 5.66)  # a lightly damped mode
     assert not rings("rov", 1.0)  # its unstable real pole at 1.01 1/s rings at no frequency
     assert not rings("usv", 2.0)
+
+
+def test_a_line_is_looked_for_beside_the_modes_the_sea_rings():
+    rng = np.random.default_rng(1)
+    dt, t = 0.1, np.arange(6000) * 0.1
+    mode = signal.lfilter([0.01], [1.0, -2 * 0.995 * np.cos(0.6 * dt), 0.995**2],
+                          rng.standard_normal(t.size))  # zeta 0.08: a roll mode the sea rings
+    white = rng.standard_normal(t.size) + mode
+    line = 0.3 * np.sin(1.0 * t)
+    assert spectral_peak(white + line, dt)["omega"] == pytest.approx(0.6, abs=0.05)
+    beside = spectral_peak(white + line, dt, beside=[(0.6, 0.083)])
+    assert beside["omega"] == pytest.approx(1.0, abs=0.05) and beside["p_value"] < 1e-4
+    # nor is the mode's skirt a line
+    assert spectral_peak(white, dt, beside=[(0.6, 0.083)])["p_value"] > 1e-3
+
+
+def test_a_roll_wave_forcing_is_found_without_the_roll_rate():
+    # the unmeasured roll rate's equation error is the smoother's, and its roll mode hid the line
+    effect = build_effect("usv", ("wave_frequency", "p", {}), seed=1)
+    outcome = run_case(Case("usv", (effect,), noise=0.05, seed=1, measured=PARTIAL["usv"]))
+    assert outcome.ranked_right and outcome.parameter_ok, outcome
 
 
 def test_a_heave_wave_forcing_on_the_rov_is_found():

@@ -12,7 +12,7 @@ zone and a rate limit change the applied input exactly as they say).
 from __future__ import annotations
 
 import itertools
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal, stats
 
+from marine_envs.models import VehicleModel
 from marine_envs.models.effects import Effect, applied_inputs
 
 from .modes import model_modes
@@ -31,6 +32,10 @@ CHANGE_TIMES = 60
 #: Narrow-band motion is looked for below this frequency, rad/s (sea waves and the slow modes
 #: they excite; above it a peak is far more likely a numerical artefact than physics).
 MAX_WAVE_FREQUENCY = 6.0
+#: The level at which each half of the record must confirm a line found in the whole record's
+#: innovations (their whitening leaves a half's line weaker against its coarser bins: a USV roll
+#: wave at 10 % sensor noise is confirmed at p = 5e-4 and 4e-14).
+CONFIRMATION_ALPHA = 0.01
 #: Grid points of a delay (in samples up to 3 s), a limit, a dead zone or a rate limit.
 GRID_POINTS = 25
 #: The physical span of an actuator's rate limit: 1-30 deg/s for a rudder or other angle, else
@@ -252,19 +257,19 @@ def bias_term(res: Residuals, channel: str, b: float) -> FloatArray:
 
 # -- narrow-band motion ---------------------------------------------------------------------------
 def wave_families(res: Residuals, alpha: float = 1e-4, max_zeta: float = 0.1) -> Iterator[Family]:
-    """A narrow-band process in one measured state's equation: a significant, narrow peak of
-    its equation-error spectrum over a smooth background, found again in each half of the
-    record (an unmodelled oscillation persists; a fluctuation of the sea's spectrum does
-    not); the term is the error band-passed about the peak (its coefficient is fitted)."""
+    """A narrow-band process in one state's equation: a significant, narrow peak of its
+    equation-error spectrum over a smooth background, found again in each half of the record
+    (an unmodelled oscillation persists; a fluctuation of the sea's spectrum does not); the term
+    is the error band-passed about the peak (its coefficient is fitted). An unmeasured state's
+    error is the smoother's, shaped by the modes it rings (a USV roll rate known only through the
+    roll angle): its line is looked for in the measured channels' whitened innovations."""
     n = len(res.model.state_names)
+    unmeasured = _innovation_line(res, alpha, max_zeta)
     for i in _dynamic_targets(res):
-        if res.model.state_names[i] not in res.channels:
-            continue
         error = res.error[:, i]
-        peak = spectral_peak(error, res.dt)
-        if peak is None or peak["p_value"] > alpha or peak["zeta"] > max_zeta \
-                or _at_natural_frequency(res, peak) \
-                or not _in_both_halves(error, peak["omega"], res.dt, alpha):
+        measured = res.model.state_names[i] in res.channels
+        peak = _error_line(res, error, alpha, max_zeta) if measured else unmeasured
+        if peak is None:
             continue
         band = _band_pass(error, peak["omega"], max(peak["zeta"], peak["resolution"]), res.dt)
         column = np.append(band, band[-1])
@@ -274,16 +279,60 @@ def wave_families(res: Residuals, alpha: float = 1e-4, max_zeta: float = 0.1) ->
                      details=peak)
 
 
-def _at_natural_frequency(res: Residuals, peak: dict[str, float]) -> bool:
-    """Whether the peak sits on a lightly damped (or lightly growing) oscillatory mode of the
-    nominal model: the sea rings such a mode, and the filter's process noise (white, the sea is
-    not) leaves a peak there in every record. Wrong damping of that mode is a
+def _error_line(res: Residuals, error: FloatArray, alpha: float, max_zeta: float
+                ) -> dict[str, float] | None:
+    """The most significant peak of a measured state's equation error if it is narrow, off
+    the model's ringing modes and found in each half; else None."""
+    peak = spectral_peak(error, res.dt)
+    if peak is None or peak["p_value"] > alpha or peak["zeta"] > max_zeta \
+            or _at_natural_frequency(res, peak) \
+            or not _in_both_halves(error, peak["omega"], res.dt, alpha):
+        return None
+    return peak
+
+
+def _innovation_line(res: Residuals, alpha: float, max_zeta: float) -> dict[str, float] | None:
+    """The most significant narrow peak, away from the model's ringing modes, of the measured
+    channels' whitened innovations (Bonferroni over the channels), found in each half; None if
+    there is none. The innovations are white but for what the model misses, and for the modes
+    the sea rings harder than the filter's white process noise."""
+    if res.innovations is None:
+        return None
+    modes = _ringing_modes(res.model)
+    best = None
+    for nu in res.innovations.nu.T:
+        peak = spectral_peak(nu, res.dt, beside=modes)
+        if peak is None or peak["zeta"] > max_zeta \
+                or peak["p_value"] * len(res.channels) > alpha \
+                or not _in_both_halves(nu, peak["omega"], res.dt, CONFIRMATION_ALPHA):
+            continue
+        if best is None or peak["ratio"] > best["ratio"]:
+            best = peak
+    return best
+
+
+def _ringing_modes(model: VehicleModel) -> list[tuple[float, float]]:
+    """``(omega (rad/s), zeta)`` of the nominal model's lightly damped (or lightly growing)
+    oscillatory modes: the sea rings them, and the filter's process noise (white, the sea is
+    not) leaves a peak there in every record. Wrong damping of such a mode is a
     ``linear_damping`` finding instead. A real pole (``zeta`` +-1) rings at no frequency: the
     ROV's unstable real pole at 1.01 1/s once hid every heave wave forcing near 1 rad/s."""
-    model = res.model
-    return any(abs(zeta) < 0.3
-               and abs(peak["omega"] - omega) <= max(2 * peak["resolution"], 2 * zeta * omega)
-               for omega, zeta in model_modes(model, model.state_names))
+    return [(omega, zeta) for omega, zeta in model_modes(model, model.state_names)
+            if abs(zeta) < 0.3]
+
+
+def _near(omega: FloatArray | float, modes: Sequence[tuple[float, float]], resolution: float
+          ) -> NDArray[np.bool_]:
+    """Whether each frequency (rad/s) lies on one of the ``(omega, zeta)`` modes' peaks."""
+    near = np.zeros(np.shape(omega), bool)
+    for centre, zeta in modes:
+        near |= np.abs(omega - centre) <= max(2 * resolution, 2 * zeta * centre)
+    return near
+
+
+def _at_natural_frequency(res: Residuals, peak: dict[str, float]) -> bool:
+    """Whether the peak sits on a ringing mode of the nominal model (:func:`_ringing_modes`)."""
+    return bool(_near(peak["omega"], _ringing_modes(res.model), peak["resolution"]))
 
 
 def _in_both_halves(x: FloatArray, omega: float, dt: float, alpha: float) -> bool:
@@ -313,18 +362,24 @@ def _welch_over_background(x: FloatArray, dt: float, segment: float = 60.0
     return 2 * np.pi * f, psd, background, dof
 
 
-def spectral_peak(x: FloatArray, dt: float, segment: float = 60.0) -> dict[str, float] | None:
-    """The most significant peak of the Welch spectrum of ``x`` over a running-median background:
-    ``omega`` (rad/s), ``zeta`` (from the half-power width), ``ratio`` (peak/background),
-    ``p_value`` (chi-square, Bonferroni over the frequencies), ``resolution`` (rad/s)."""
+def spectral_peak(x: FloatArray, dt: float, segment: float = 60.0,
+                  beside: Sequence[tuple[float, float]] = ()) -> dict[str, float] | None:
+    """The most significant peak of the Welch spectrum of ``x`` over a running-median background,
+    off the peaks of the ``beside`` modes ``(omega (rad/s), zeta)``: ``omega`` (rad/s), ``zeta``
+    (from the half-power width), ``ratio`` (peak/background), ``p_value`` (chi-square,
+    Bonferroni over the frequencies), ``resolution`` (rad/s)."""
     spectrum = _welch_over_background(x, dt, segment)
     if spectrum is None:
         return None
     omega, psd, background, dof = spectrum
     usable = (omega > 0.15) & (omega < min(0.8 * np.pi / dt, MAX_WAVE_FREQUENCY))
+    usable &= ~_near(omega, beside, float(omega[1] - omega[0]))
     if usable.sum() < 10:
         return None
-    ratio = np.where(usable, psd / background, 0.0)
+    ratio = psd / background
+    if beside:  # a peak tops its neighbours; a mode's skirt falls away from the mode
+        ratio[1:-1] *= (ratio[1:-1] >= ratio[:-2]) & (ratio[1:-1] >= ratio[2:])
+    ratio = np.where(usable, ratio, 0.0)
     k = int(np.argmax(ratio))
     p_value = min(1.0, float(stats.chi2.sf(ratio[k] * dof, dof)) * int(usable.sum()))
     half = psd[k] / 2
