@@ -1,7 +1,6 @@
 """The diagnosis's noise model: the sea as coloured forcing, and the tests that keep a chance
 fluctuation from becoming a finding."""
 
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -11,8 +10,9 @@ from agents.simulate import simulate
 from estimators.diagnosis import diagnose
 from estimators.diagnosis.cases import PARTIAL, Case, build_effect, run_case
 from estimators.diagnosis.hypotheses import (
-    _at_natural_frequency,
     _in_both_halves,
+    _near,
+    _ringing_modes,
     _targets,
     spectral_peak,
 )
@@ -90,8 +90,7 @@ def test_a_wave_must_persist_through_the_record():
 
 def test_only_an_oscillatory_mode_explains_a_spectral_peak_away():
     def rings(model: str, omega: float) -> bool:
-        return _at_natural_frequency(SimpleNamespace(model=get_model(model)),
-                                     {"omega": omega, "resolution": 0.1})
+        return bool(_near(omega, _ringing_modes(get_model(model)), resolution=0.1))
 
     assert rings("usv", 0.63)  # its roll mode (zeta 0.09): the sea rings it in every record
     assert rings("rov", 5.66)  # a lightly damped mode

@@ -378,7 +378,7 @@ def _state_terms(selection: Selection) -> list[Effect]:
             and s.fitted.effect.effect not in ("wave_frequency", "parameter_change")]
 
 
-def _targets(effects: Sequence[Effect], residuals: Residuals) -> set[str]:
+def _unmeasured(effects: Sequence[Effect], residuals: Residuals) -> set[str]:
     """The unmeasured states ``effects`` act on."""
     return {e.target for e in effects if e.target not in residuals.channels}
 
@@ -402,7 +402,7 @@ def _resmoothed(recording: Recording, residuals: Residuals, selection: Selection
         return selection
     for _ in range(RESMOOTHING_PASSES):
         carried = _state_terms(selection)
-        if not _targets(carried, residuals):  # the nominal smoothing follows the data there
+        if not _unmeasured(carried, residuals):  # the nominal smoothing follows the data there
             break
         try:
             states = estimate(recording, ModelWithEffects(model, carried))
@@ -411,7 +411,7 @@ def _resmoothed(recording: Recording, residuals: Residuals, selection: Selection
         candidate = replace(residuals, x=states.x, x_std=states.x_std, error=equation_error(
             model, states.x, residuals.u, residuals.dt, residuals.substeps))
         again = select(candidate, config)
-        if not _targets(carried, residuals) <= _targets(_state_terms(again), residuals):
+        if not _unmeasured(carried, residuals) <= _unmeasured(_state_terms(again), residuals):
             break  # not a fixed point: the terms smoothed with are not found again
         repeated, selection = _repeats(selection, again), again
         if repeated:

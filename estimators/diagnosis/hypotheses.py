@@ -263,42 +263,44 @@ def wave_families(res: Residuals, alpha: float = 1e-4, max_zeta: float = 0.1) ->
     is the error band-passed about the peak (its coefficient is fitted). An unmeasured state's
     error is the smoother's, shaped by the modes it rings (a USV roll rate known only through the
     roll angle): its line is looked for in the measured channels' whitened innovations."""
-    n = len(res.model.state_names)
-    unmeasured = _innovation_line(res, alpha, max_zeta)
-    for i in _dynamic_targets(res):
+    names, modes = res.model.state_names, _ringing_modes(res.model)
+    targets = _dynamic_targets(res)
+    unmeasured = _innovation_line(res, modes, alpha, max_zeta) \
+        if any(names[i] not in res.channels for i in targets) else None
+    for i in targets:
         error = res.error[:, i]
-        measured = res.model.state_names[i] in res.channels
-        peak = _error_line(res, error, alpha, max_zeta) if measured else unmeasured
+        peak = _error_line(error, res.dt, modes, alpha, max_zeta) \
+            if names[i] in res.channels else unmeasured
         if peak is None:
             continue
         band = _band_pass(error, peak["omega"], max(peak["zeta"], peak["resolution"]), res.dt)
         column = np.append(band, band[-1])
-        yield Family("wave_frequency", res.model.state_names[i],
+        yield Family("wave_frequency", names[i],
                      [{"omega": peak["omega"], "zeta": peak["zeta"]}],
-                     _in_equation(i, column[:, None], n), coefficient="gain", n_parameters=2,
-                     details=peak)
+                     _in_equation(i, column[:, None], len(names)), coefficient="gain",
+                     n_parameters=2, details=peak)
 
 
-def _error_line(res: Residuals, error: FloatArray, alpha: float, max_zeta: float
-                ) -> dict[str, float] | None:
-    """The most significant peak of a measured state's equation error if it is narrow, off
-    the model's ringing modes and found in each half; else None."""
-    peak = spectral_peak(error, res.dt)
+def _error_line(error: FloatArray, dt: float, modes: Sequence[tuple[float, float]],
+                alpha: float, max_zeta: float) -> dict[str, float] | None:
+    """The most significant peak of a measured state's equation error if it is narrow, not on
+    one of the ringing ``modes`` and found in each half; else None."""
+    peak = spectral_peak(error, dt)
     if peak is None or peak["p_value"] > alpha or peak["zeta"] > max_zeta \
-            or _at_natural_frequency(res, peak) \
-            or not _in_both_halves(error, peak["omega"], res.dt, alpha):
+            or _near(peak["omega"], modes, peak["resolution"]) \
+            or not _in_both_halves(error, peak["omega"], dt, alpha):
         return None
     return peak
 
 
-def _innovation_line(res: Residuals, alpha: float, max_zeta: float) -> dict[str, float] | None:
-    """The most significant narrow peak, away from the model's ringing modes, of the measured
+def _innovation_line(res: Residuals, modes: Sequence[tuple[float, float]], alpha: float,
+                     max_zeta: float) -> dict[str, float] | None:
+    """The most significant narrow peak, away from the ringing ``modes``, of the measured
     channels' whitened innovations (Bonferroni over the channels), found in each half; None if
     there is none. The innovations are white but for what the model misses, and for the modes
     the sea rings harder than the filter's white process noise."""
     if res.innovations is None:
         return None
-    modes = _ringing_modes(res.model)
     best = None
     for nu in res.innovations.nu.T:
         peak = spectral_peak(nu, res.dt, beside=modes)
@@ -328,11 +330,6 @@ def _near(omega: FloatArray | float, modes: Sequence[tuple[float, float]], resol
     for centre, zeta in modes:
         near |= np.abs(omega - centre) <= max(2 * resolution, 2 * zeta * centre)
     return near
-
-
-def _at_natural_frequency(res: Residuals, peak: dict[str, float]) -> bool:
-    """Whether the peak sits on a ringing mode of the nominal model (:func:`_ringing_modes`)."""
-    return bool(_near(peak["omega"], _ringing_modes(res.model), peak["resolution"]))
 
 
 def _in_both_halves(x: FloatArray, omega: float, dt: float, alpha: float) -> bool:
