@@ -295,8 +295,9 @@ def _error_line(error: FloatArray, dt: float, modes: Sequence[tuple[float, float
 
 def _innovation_line(res: Residuals, modes: Sequence[tuple[float, float]], alpha: float,
                      max_zeta: float) -> dict[str, float] | None:
-    """The most significant narrow peak, away from the ringing ``modes``, of the measured
-    channels' whitened innovations (Bonferroni over the channels), found in each half; None if
+    """The strongest (largest ratio over its background) significant narrow peak, away from the
+    ringing ``modes``, of the measured channels' whitened innovations (Bonferroni over the
+    channels), found in each half; None if
     there is none. The innovations are white but for what the model misses, and for the modes
     the sea rings harder than the filter's white process noise."""
     if res.innovations is None:
