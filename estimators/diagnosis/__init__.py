@@ -10,6 +10,7 @@ seaway, judged by the nominal filter's innovations:
 * :mod:`.hypotheses` - every catalogue entry as a family of candidate terms fitted to them;
 * :mod:`.selection` - cross-validated, significance-tested selection of the families;
 * :mod:`.rollout` - multi-step predictions with and without the findings;
+* :mod:`.feedback` - whether an input effect holds on the input the controller did not choose;
 
 model tests (decays, zigzags, lab runs, series of them), judged in free simulation:
 

@@ -33,6 +33,7 @@ from marine_envs.models import MeasuredDisturbances, VehicleModel, get_model
 from marine_envs.models.effects import Effect, ModelWithEffects
 from marine_envs.recording import Recording, read_recording
 
+from . import feedback
 from .explain import explain, separating_test
 from .model_test import diagnose_series
 from .output_error import parameter_bounds, term_label
@@ -509,8 +510,10 @@ def _held_out_p(res: Residuals, fitted: Sequence[Fitted], k: int, held_out: Bool
 def _confirm(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
     """Withdraw the findings whose own term, refitted on the first part, does not improve the
     held-out predictions or does not predict the held-out innovations at level ``alpha``: the
-    search's evidence was the sea's colour or the noise, not a term the data repeat. They are
-    kept under ``unconfirmed``; the rest are validated again.
+    search's evidence was the sea's colour or the noise, not a term the data repeat; and the
+    input effects that do not hold on the part of the input the controller did not choose
+    (:mod:`.feedback`). They are kept under ``unconfirmed``, with the reason; the rest are
+    validated again.
 
     A term on a state no channel measures is judged by the innovations alone: its predictions
     start from the nominal smoother's estimate of that state, which lacks the term (errors in
@@ -518,15 +521,33 @@ def _confirm(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
     prediction error and passed the innovation test at 2e-4)."""
     selection, res = diagnosis.selection, diagnosis.residuals
     assert selection is not None and res is not None
-    withdrawn = [k for k, s in enumerate(selection.findings) if s.held_out_p > config.alpha
-                 or (s.alone <= 0 and not _unmeasured([s.effect], res))]
+    reasons = {k: _unconfirmed_because(s, res, config) for k, s in enumerate(selection.findings)}
+    withdrawn = [k for k, why in reasons.items() if why]
     if not withdrawn:
         return
-    diagnosis.unconfirmed += [diagnosis.findings[k] for k in withdrawn]
+    diagnosis.unconfirmed += [replace(diagnosis.findings[k], withdrawn=reasons[k])
+                              for k in withdrawn]
     selection.findings = [s for k, s in enumerate(selection.findings) if k not in withdrawn]
     diagnosis.findings = [f for k, f in enumerate(diagnosis.findings) if k not in withdrawn]
     diagnosis.mismatch = bool(diagnosis.findings)
     _validate(diagnosis, config)
+
+
+def _unconfirmed_because(scored: Scored, res: Residuals, config: DiagnosisConfig) -> str:
+    """Why a finding is withdrawn (:func:`_confirm`), or ``""``."""
+    if scored.held_out_p > config.alpha:
+        return (f"refitted on the first part, it does not predict the held-out innovations "
+                f"(p = {scored.held_out_p:.2g})")
+    if scored.alone <= 0 and not _unmeasured([scored.effect], res):
+        return "refitted on the first part, it does not improve the held-out predictions"
+    if feedback.is_input_effect(scored.effect):
+        check = feedback.check(res, scored.effect)
+        if check is not None and not check.holds(config.alpha):
+            return (f"the input follows the controller: on the part of it the controller did "
+                    f"not choose, the term's coefficient is {check.instrumental:+.2f} +- "
+                    f"{check.std:.2f} (p = {check.p_value:.2g}) against "
+                    f"{check.least_squares:+.2f} on the whole input")
+    return ""
 
 
 def _alternatives(selection: Selection) -> list[dict[str, Any]]:

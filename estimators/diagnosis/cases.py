@@ -168,6 +168,7 @@ class Outcome:
     :param seconds: wall time of the diagnosis, s.
     :param parameters: each finding's fitted parameters, in rank order (SI units).
     :param alternatives: terms the record supports as well as a finding, ``"effect:target"``.
+    :param withdrawn: the withdrawn candidates, ``"effect:target: why"``.
     """
 
     case: str
@@ -184,6 +185,7 @@ class Outcome:
     reason: str = ""
     parameters: list[dict[str, Any]] = field(default_factory=list)
     alternatives: list[str] = field(default_factory=list)
+    withdrawn: list[str] = field(default_factory=list)
 
 
 def label(effect: str, target: str) -> str:
@@ -280,7 +282,9 @@ def score(case: Case, diagnosis: Diagnosis, seconds: float) -> Outcome:
                 found=[label(f.effect, f.target) for f in findings], confidences=confidences,
                 improvement=improvement, seconds=seconds, reason=diagnosis.reason,
                 parameters=[dict(f.parameters) for f in findings],
-                alternatives=[label(a["effect"], a["target"]) for a in diagnosis.alternatives])
+                alternatives=[label(a["effect"], a["target"]) for a in diagnosis.alternatives],
+                withdrawn=[f"{label(f.effect, f.target)}: {f.withdrawn}"
+                           for f in diagnosis.unconfirmed])
     if not case.effects:
         alarm = any(c >= CONFIDENT for c in confidences)
         return Outcome(**base, ranked_right=not alarm, parameter_ok=None, improvement_ok=None,

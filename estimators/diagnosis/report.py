@@ -178,13 +178,13 @@ def _alternatives(alternatives: Sequence[dict[str, Any]]) -> list[str]:
 
 
 def _withdrawn(unconfirmed: Sequence[Finding]) -> list[str]:
-    """Terms the search accepted but the held-out predictions did not confirm."""
+    """Terms the search accepted but the confirmation withdrew, each with the reason."""
     if not unconfirmed:
         return []
-    names = ", ".join(f"`{f.effect}` on `{f.target}` ({cell(parameters(f))})"
-                      for f in unconfirmed)
-    return ["Withdrawn: " + names + ". Significant on the innovations but, refitted on the "
-            "first part, it did not improve the held-out predictions.", ""]
+    return ["Withdrawn (significant on the innovations, not confirmed):", ""] + [
+        f"- `{f.effect}` on `{f.target}` ({cell(parameters(f))}): "
+        + (f.withdrawn or "refitted on the first part, it did not improve the held-out "
+           "predictions") + "." for f in unconfirmed] + [""]
 
 
 def _fit(diagnosis: Diagnosis) -> list[str]:

@@ -27,6 +27,7 @@ class Finding:
     :param std: their standard deviations.  :param confidence: in [0, 1].
     :param improvement: held-out share of the excess prediction error this term removes alone.
     :param explanation: what it means, in words.
+    :param withdrawn: why it is not confirmed (the ``unconfirmed`` entries), or ``""``.
     """
 
     effect: str
@@ -37,6 +38,7 @@ class Finding:
     improvement: float
     explanation: str
     standard_form: dict[str, float] = field(default_factory=dict)
+    withdrawn: str = ""
 
     def as_effect(self) -> Effect:
         return Effect(self.effect, self.target, self.parameters)
@@ -106,8 +108,9 @@ class Diagnosis:
         """A few lines for a terminal."""
         if self.mismatch is None:
             return f"{self.model}: cannot diagnose: {self.reason}"
-        withdrawn = [f"  withdrawn, not confirmed on held-out data: {f.effect} on {f.target} "
-                     f"(improvement {f.improvement:.0%})" for f in self.unconfirmed]
+        withdrawn = [f"  withdrawn: {f.effect} on {f.target} (improvement {f.improvement:.0%}): "
+                     + (f.withdrawn or "not confirmed on held-out data")
+                     for f in self.unconfirmed]
         lines = [f"  calibrated {n} = {_fmt(q['value'])}"
                  + (f" ± {_fmt(q['std'])}" if "std" in q else "") + f": {q['status']}"
                  for n, q in self.calibration_quality.get("parameters", {}).items()]
@@ -169,6 +172,8 @@ def _finding_dict(f: Finding) -> dict[str, Any]:
                                       "explanation", "improvement")}
     if f.standard_form:
         out["standard_form"] = f.standard_form
+    if f.withdrawn:
+        out["withdrawn"] = f.withdrawn
     return out
 
 
