@@ -32,7 +32,7 @@ from scipy import stats
 
 from marine_envs.models.effects import INPUT_EFFECTS, Effect, applied_inputs
 
-from .hypotheses import _states
+from .hypotheses import midpoint_states
 from .residuals import Residuals
 
 FloatArray = NDArray[np.float64]
@@ -101,7 +101,7 @@ def check(res: Residuals, effect: Effect) -> FeedbackCheck | None:
     The instruments are the effect's term and the input's own (a gain's) term computed from
     the input the controller did not choose (two-stage least squares): a saturation or dead
     zone of the whole command may never act on that part alone, but is correlated with it."""
-    model, x, u = res.model, _states(res), res.u
+    model, x, u = res.model, midpoint_states(res), res.u
     measured = np.array([name in res.channels for name in model.state_names])
     gain = Effect("input_gain", effect.target, {"k": 2.0})
     effect = gain if effect.effect == "input_gain" else effect

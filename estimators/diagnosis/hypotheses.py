@@ -113,7 +113,7 @@ def all_families(res: Residuals) -> Iterator[Family]:
 
 
 # -- state terms ----------------------------------------------------------------------------------
-def _states(res: Residuals) -> FloatArray:
+def midpoint_states(res: Residuals) -> FloatArray:
     """The smoothed states at the middle of each step ``(T, n)`` (the last one repeated)."""
     x = res.midpoint
     return np.vstack([x, x[-1:]])
@@ -151,7 +151,7 @@ def _in_equation(i: int, columns: FloatArray, n: int) -> FloatArray:
 def state_families(res: Residuals) -> Iterator[Family]:
     """A current in every observable state's equation; linear/quadratic/cubic damping,
     coupling and cubic restoring in the force (non-kinematic) equations."""
-    x, names = _states(res), res.model.state_names
+    x, names = midpoint_states(res), res.model.state_names
     n = len(names)
     kinematic = displacements(res.model)
     moving = _moving(res)
@@ -182,7 +182,7 @@ def change_families(res: Residuals, margin: float = 0.05, times: FloatArray | No
     """A step change, at one of ``times`` (default: ``CHANGE_TIMES`` over the record but its
     ends), of the damping (``c * x_t``) or of a constant force in one equation (``target``'s,
     default: every observable state's)."""
-    x, t = _states(res), res.time
+    x, t = midpoint_states(res), res.time
     n = len(res.model.state_names)
     if times is None:
         span = t[-1] - t[0]
@@ -205,7 +205,7 @@ def change_families(res: Residuals, margin: float = 0.05, times: FloatArray | No
 def input_families(res: Residuals) -> Iterator[Family]:
     """Gain (free), and delay, saturation, dead zone and rate limit (grids) of each input."""
     model, u, dt = res.model, res.u, res.dt
-    x = _states(res)
+    x = midpoint_states(res)
     base = model.rhs(x, u)
 
     def terms(effects: list[Effect]) -> FloatArray:
@@ -249,7 +249,7 @@ def bias_families(res: Residuals) -> Iterator[Family]:
 def bias_term(res: Residuals, channel: str, b: float) -> FloatArray:
     """What a bias ``b`` on ``channel`` does to the nominal equations evaluated on the smoothed
     states (which followed the biased channel): ``f(x - b dx/dy) - f(x)`` ``(T, n)``."""
-    x, u = _states(res), res.u
+    x, u = midpoint_states(res), res.u
     direction = np.linalg.pinv(_output_matrix(res.model, res.channels))[:, res.channels.index(
         channel)]
     return res.model.rhs(x - b * direction, u) - res.model.rhs(x, u)
@@ -413,7 +413,7 @@ def unlisted_families(res: Residuals) -> Iterator[Family]:
     """A library of products the catalogue does not name (``x_a * x_b``, ``x_a * u_j``,
     ``x_a**2``, ``u_j**2``), each as a member, in each equation: the sparse regression's one
     term, chosen on the training data."""
-    model, x = res.model, _states(res)
+    model, x = res.model, midpoint_states(res)
     variables = [(model.state_names[i], x[:, i]) for i in _moving(res)]
     variables += [(n, res.u[:, j]) for j, n in enumerate(model.input_names)
                   if np.ptp(res.u[:, j]) > 0]
