@@ -273,9 +273,8 @@ def run_diagnosis(case: str, recordings: Sequence[Recording], model: str, calibr
             converted, unit = _convert(recordings[0], channel, value)
             row["rms"].setdefault(channel, {"unit": unit})[stage] = converted
     row["improvement"] = d.fit.get("improvement")
-    if d.comparison is not None and calibrate:  # the calibrated names refitted with the terms
-        final = d.comparison.final.values()
-        row["final_values"] = {n: final[n] for n in row["calibrated"] if n in final}
+    # the calibrated names refitted with the terms: value, std, status
+    row["final_values"] = d.calibration_quality.get("with_findings", {})
     row["diagnosis"] = d.to_dict()
     return row
 
@@ -393,10 +392,11 @@ def format_row(row: dict[str, Any]) -> str:
     form = row["findings"][-1]["standard_form"] if row["findings"] else {}
     calibrated = ", ".join(f"{n}={_fmt(q['value'])} ± {_fmt(q['std'])}"
                            for n, q in row.get("calibrated", {}).items()) or "-"
-    final = row.get("final_values", {})
-    if any(abs(v / row["calibrated"][n]["value"] - 1) > 0.1 for n, v in final.items()):
-        calibrated += " (final model: " + ", ".join(f"{n}={_fmt(v)}"
-                                                    for n, v in final.items()) + ")"
+    final = row.get("final_values", {})  # a value the findings leave undetermined is not shown
+    if any(abs(q["value"] / row["calibrated"][n]["value"] - 1) > 0.1 for n, q in final.items()):
+        calibrated += " (final model: " + ", ".join(
+            f"{n}={_fmt(q['value'])} ± {_fmt(q['std'])}" if q["status"] == "identified"
+            else f"{n} not determined" for n, q in final.items()) + ")"
     rms = ", ".join(f"{c} {_fmt(v['before'])} → {_fmt(v['after'])} {v['unit']}"
                     for c, v in row.get("rms", {}).items() if "before" in v) or "-"
     improvement = row.get("improvement")

@@ -136,7 +136,7 @@ def test_a_saved_agent_applies_only_where_it_was_trained(tmp_path):
 
 def test_ray_gives_the_local_numbers(tmp_path):
     pytest.importorskip("ray")
-    grid = Grid(vehicles=("usv", "rov"), estimators=("true", "kf"), controllers=("lqr", "ppo"),
+    grid = Grid(vehicles=("usv",), estimators=("true", "kf"), controllers=("lqr", "ppo"),
                 seeds=2, seconds=5.0, timesteps=256)
     local = run_grid(grid, tmp_path / "local", workers=1, progress=False)
     remote = run_grid(grid, tmp_path / "ray", backend="ray", workers=2, progress=False)

@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from estimators.diagnosis import diagnose
+from estimators.diagnosis.model_test_report import markdown
 from estimators.diagnosis.modes import decay_analysis, model_modes, nearest_mode
 from estimators.diagnosis.output_error import Series, Structure, basis
 from marine_envs.models import get_model
@@ -159,6 +160,11 @@ def test_norrbin_damping_is_found_across_a_zigzag_series():
     assert "leave one recording out" in diagnosis.fit["validation"]
     assert diagnosis.fit["improvement"] >= 0.3
     assert diagnosis.fit["after"]["rmse"]["psi"] < 0.5 * diagnosis.fit["before"]["rmse"]["psi"]
+    # Norrbin's form per unit inertia, r' = -r/T - B3 r^3 + (K/T) delta: K = -0.1, T = 8 s
+    assert top.standard_form["B1"] == pytest.approx(1 / 8.0, rel=0.05)
+    assert top.standard_form["B3"] == pytest.approx(3.0, rel=0.1)
+    assert top.standard_form["G_delta"] == pytest.approx(-0.1 / 8.0, rel=0.05)
+    assert "r³ - 0.0125 delta" in markdown(diagnosis)  # the report's final equation
 
 
 def test_a_rudder_rate_limit_is_found_from_the_commanded_rudder():

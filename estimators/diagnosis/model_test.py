@@ -189,12 +189,14 @@ def _finding(scored: Scored, comparison: Comparison, share: float) -> Finding:
 
 def standard_form(fit: Fit, target: str) -> dict[str, float]:
     """The fitted equation of ``target`` in its field's coefficients: ``target' = -B1 x - B2
-    x|x| - B3 x^3 - C1 q - C3 q^3 + ...`` (x the target, q its restoring source), per unit
-    inertia, at the fitted parameters (B: damping, C: restoring)."""
+    x|x| - B3 x^3 - C1 q - C3 q^3 + G_u u + ...`` (x the target, q its restoring source, u each
+    input that moves in the records), per unit inertia, at the fitted parameters (B: damping,
+    C: restoring, G: input gain; Nomoto's ``T r' + r = K delta`` has B1 = 1/T, G = K/T, which
+    stay defined when a nonlinear damping takes over B1 and K, T do not)."""
     structure, values = fit.structure, fit.values()
     model = structure.series.model
     model = model.with_params(**{n: values[n] for n in structure.names})
-    A = model.linearize()[0]
+    A, B, _ = model.linearize()
     i = model.state_names.index(target)
     form = {"B1": -float(A[i, i])}
     for term in structure.terms:
@@ -208,7 +210,9 @@ def standard_form(fit: Fit, target: str) -> dict[str, float]:
         source = term.parameters.get("source")
         if source and "C1" not in form:
             form["C1"] = -float(A[i, model.state_names.index(source)])
-    return {k: round(v, 6) for k, v in form.items()}
+    form |= {f"G_{u}": float(B[i, j]) for j, u in enumerate(model.input_names)
+             if structure.series.moving[j] and B[i, j] != 0}
+    return {k: float(f"{v:.6g}") for k, v in form.items()}
 
 
 def _equal(comparison: Comparison, a: Scored, b: Scored) -> bool:

@@ -174,10 +174,13 @@ def _calibration(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
     for name, q in parameters.items():
         row = (f"| {name} | {num(float(getattr(comparison.series.model.params, name)))} | "
                f"{num(q['value'])} ± {num(q['std'])} |")
+        status = q["status"]
         if with_terms:
             k = labels.index(name)
             row += f" {num(float(final.theta[k]))} ± {num(float(final.std[k]))} |"
-        rows.append(row + f" {cell(q['status'])} |")
+            refitted = quality.get("with_findings", {}).get(name, {}).get("status", "identified")
+            status += "" if refitted == "identified" else f"; with the findings {refitted}"
+        rows.append(row + f" {cell(status)} |")
     out = ["## Calibrated parameters", "",
            "Fitted by output error (free simulation of "
            + ("every recording" if len(comparison.series.runs) > 1 else "the whole record")
@@ -211,8 +214,7 @@ def _findings(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
             "improvement | explanation |",
             "| ---: | --- | --- | --- | --- | ---: | ---: | --- |"]
     for k, f in enumerate(diagnosis.findings, 1):
-        form = ", ".join(f"{key} = {num(f.standard_form[key])}" for key, _ in STANDARD_TERMS
-                         if key in f.standard_form)
+        form = ", ".join(f"{key} = {num(value)}" for key, value in f.standard_form.items())
         out.append(f"| {k} | {f.effect} | {f.target} | {cell(parameters(f))} | {form} | "
                    f"{f.confidence:.2f} | {_percent(f.improvement)} | "
                    f"{cell(f.explanation)} |")
@@ -253,21 +255,18 @@ def _equation(final: Fit, target: str, findings: Sequence[Finding]) -> str:
         sources = [q for q in np.flatnonzero(A[i]) if q != i]
         source = model.state_names[sources[-1]] if sources else "q"
     terms = []
-    for key, shape in STANDARD_TERMS:
-        if form.get(key, 0.0) != 0.0:
-            value = -form[key]
-            terms.append(f"{'-' if value < 0 else '+'} {abs(value):.4g} "
-                         f"{shape.format(x=target, q=source)}")
-    if not terms:
+    signed = [(-form[key], shape.format(x=target, q=source)) for key, shape in STANDARD_TERMS
+              if form.get(key, 0.0) != 0.0]
+    signed += [(value, key[2:]) for key, value in form.items() if key.startswith("G_")]
+    if not signed:
         return ""
+    terms = [f"{'-' if value < 0 else '+'} {abs(value):.4g} {shape}" for value, shape in signed]
     others = [t for t in final.structure.terms if t.target == target and t.effect not in
               ("linear_damping", "quadratic_damping", "nonlinear_damping", "coupling",
                "nonlinear_restoring")]
     joined = " ".join(terms)
     text = f"{target}' = " + (joined[2:] if joined.startswith("+") else "-" + joined[2:])
-    extra = (" + (other terms)" if others else "") \
-        + (" + (inputs)" if final.structure.series.moving.any() else "")
-    return text + extra
+    return text + (" + (other terms)" if others else "")
 
 
 def _final_values(final: Fit) -> list[str]:
@@ -368,12 +367,13 @@ with its coefficient's relative standard deviation and halves when a competitor 
 data as well (see Alternatives).
 
 **Standard form.** Each force equation with a finding is written per unit inertia as
-`x' = -B1 x - B2 x|x| - B3 x^3 - C1 q - C3 q^3` (+ inputs), x the state of the equation (the
-roll rate p for roll) and q its restoring source (the roll angle phi): B1 linear, B2 quadratic
-and B3 cubic damping; C1 linear restoring (the natural frequency squared) and C3 cubic
-restoring (C3 > 0 stiffening: the period shortens with amplitude; C3 < 0 softening). A
-negative B lowers the damping at large amplitude; next to another damping form it usually
-trades off with it over the amplitudes recorded.
+`x' = -B1 x - B2 x|x| - B3 x^3 - C1 q - C3 q^3 + G_u u`, x the state of the equation (the
+roll rate p for roll), q its restoring source (the roll angle phi) and u each input that moves
+in the records: B1 linear, B2 quadratic and B3 cubic damping; C1 linear restoring (the natural
+frequency squared) and C3 cubic restoring (C3 > 0 stiffening: the period shortens with
+amplitude; C3 < 0 softening); G_u the input's gain (Nomoto's K/T, with B1 = 1/T). A negative B
+lowers the damping at large amplitude; next to another damping form it usually trades off with
+it over the amplitudes recorded.
 
 **Figures.** In the time histories a right model's orange curve lies on the black record in
 the shaded (held-out) part too; the errors should shrink to the dotted noise band. On the
