@@ -1,14 +1,14 @@
 """The diagnosis on the tuned part of its seeded acceptance set (issue 6), as a regression guard:
-every catalogue effect of the USV and the hovercraft once, at 5 % and 10 % sensor noise in turn,
-one of each vehicle's pairs at each noise and one effect-free record per vehicle and noise, seed
-0 (``TUNED_VEHICLES``). The whole tuned set (both noises for every effect, seeds 0 and 1), the
-held-out seeds and the other three vehicles are measured by ``benchmarks/diagnosis.py``, not
-here: too long for CI.
+every catalogue effect once, on the USV and the hovercraft in turn and at 5 % and 10 % sensor
+noise in turn, one pair per vehicle and one effect-free record per vehicle and noise, seed 0
+(``TUNED_VEHICLES``). The whole tuned set (every effect on both vehicles at both noises, seeds
+0 and 1), the held-out seeds and the other three vehicles are measured by
+``benchmarks/diagnosis.py``, not here: too long for CI.
 
 The rates are held at floors: what the method reaches today, a little below, so that a change
 that makes it worse fails here. The acceptance targets themselves
 (``estimators.diagnosis.cases.ACCEPTANCE``) are reported by ``benchmarks/diagnosis.py``; raise
-the floors towards them as the method improves. About 10 min on 2 cores.
+the floors towards them as the method improves. About 5 min on 2 cores.
 """
 
 import os
@@ -29,21 +29,23 @@ from estimators.diagnosis.cases import (
 
 NOISES = (0.05, 0.10)
 
-#: Floors under the rates measured on this set (2026-11-29: right, ranked right, key parameter
-#: and held-out improvement 34/34, effect-free records clean 4/4): two misses, one false alarm.
-FLOORS = {"right": 0.94, "ranked_right": 0.94, "parameter_ok": 0.94, "improvement_ok": 0.94,
+#: Floors under the rates measured on this set (2026-11-29: ranked right and held-out improvement
+#: 17/17, right and key parameter 16/17, effect-free records clean 4/4): about one more miss each.
+FLOORS = {"right": 0.88, "ranked_right": 0.94, "parameter_ok": 0.88, "improvement_ok": 0.94,
           "clean": 0.75}
 
 
 def alternating_cases() -> list[Case]:
-    """Each vehicle's effects (and pairs) at the two noises in turn, the two vehicles out of
-    phase, so every effect runs once and each noise sees half of them; one effect-free record
-    per vehicle and noise, each on its own seed."""
+    """Catalogue entry k on vehicle k mod 2 at noise (k // 2) mod 2, so each effect runs once
+    and each vehicle sees both noises; pair v of vehicle v at the other noise; one effect-free
+    record per vehicle and noise, each on its own seed."""
     cases = []
     for v, model in enumerate(TUNED_VEHICLES):
         for n, noise in enumerate(NOISES):
-            effects = catalogue_cases((model,), noises=(noise,), effect_free=0)
-            cases += [c for k, c in enumerate(effects) if (k + v) % 2 == n]
+            groups = catalogue_cases((model,), noises=(noise,), effect_free=0)
+            singles, pairs = groups[:len(TARGETS[model])], groups[len(TARGETS[model]):]
+            cases += [c for k, c in enumerate(singles) if k % 2 == v and (k // 2) % 2 == n]
+            cases += [pairs[v]] if n != v else []
             cases += catalogue_cases((model,), noises=(noise,), pairs=False, effect_free=1,
                                      effect_free_seed=EFFECT_FREE_SEED + n)[-1:]
     return cases
@@ -58,7 +60,8 @@ def outcomes():
 def test_the_set_covers_every_effect_on_two_vehicles_and_both_noises(outcomes):
     assert len({o.model for o in outcomes}) >= 2
     assert {o.case.split("/")[2] for o in outcomes} == {"noise=0.05", "noise=0.10"}
-    assert {t for o in outcomes for t in o.true} >= {f"{e}:{t}" for e, t, _ in TARGETS["usv"]}
+    assert {t.split(":")[0] for o in outcomes for t in o.true} == {
+        e for entries in TARGETS.values() for e, _, _ in entries}
     assert sum(not o.true for o in outcomes) == 2 * len(NOISES)
     assert not [o.case for o in outcomes if o.reason.startswith("crashed")]
 
