@@ -254,7 +254,6 @@ def _equation(final: Fit, target: str, findings: Sequence[Finding]) -> str:
         i = model.state_names.index(target)
         sources = [q for q in np.flatnonzero(A[i]) if q != i]
         source = model.state_names[sources[-1]] if sources else "q"
-    terms = []
     signed = [(-form[key], shape.format(x=target, q=source)) for key, shape in STANDARD_TERMS
               if form.get(key, 0.0) != 0.0]
     signed += [(value, key[2:]) for key, value in form.items() if key.startswith("G_")]
