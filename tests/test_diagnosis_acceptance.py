@@ -42,12 +42,11 @@ def alternating_cases() -> list[Case]:
     cases = []
     for v, model in enumerate(TUNED_VEHICLES):
         for n, noise in enumerate(NOISES):
-            groups = catalogue_cases((model,), noises=(noise,), effect_free=0)
+            *groups, effect_free = catalogue_cases((model,), noises=(noise,), effect_free=1,
+                                                   effect_free_seed=EFFECT_FREE_SEED + n)
             singles, pairs = groups[:len(TARGETS[model])], groups[len(TARGETS[model]):]
             cases += [c for k, c in enumerate(singles) if k % 2 == v and (k // 2) % 2 == n]
-            cases += [pairs[v]] if n != v else []
-            cases += catalogue_cases((model,), noises=(noise,), pairs=False, effect_free=1,
-                                     effect_free_seed=EFFECT_FREE_SEED + n)[-1:]
+            cases += ([pairs[v]] if n != v else []) + [effect_free]
     return cases
 
 
