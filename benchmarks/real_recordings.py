@@ -231,6 +231,16 @@ def yaw_leave_one_out(recordings: Sequence[Recording]) -> list[dict[str, Any]]:
 
 
 # -- diagnosing -----------------------------------------------------------------------------------
+def _final_value(name: str, quality: dict[str, Any]) -> str:
+    """A refitted value with its std, flagged when poorly identified; "not determined" when its
+    std reaches its size (a value the findings leave undetermined is not shown)."""
+    value, std = quality["value"], quality["std"]
+    if not std < abs(value):  # NaN and inf too
+        return f"{name} not determined"
+    text = f"{name}={_fmt(value)} ± {_fmt(std)}"
+    return text if quality["status"] == "identified" else text + " (poorly identified)"
+
+
 def _fmt(value: float) -> str:
     return f"{value:.3g}"
 
@@ -392,11 +402,10 @@ def format_row(row: dict[str, Any]) -> str:
     form = row["findings"][-1]["standard_form"] if row["findings"] else {}
     calibrated = ", ".join(f"{n}={_fmt(q['value'])} ± {_fmt(q['std'])}"
                            for n, q in row.get("calibrated", {}).items()) or "-"
-    final = row.get("final_values", {})  # a value the findings leave undetermined is not shown
+    final = row.get("final_values", {})
     if any(abs(q["value"] / row["calibrated"][n]["value"] - 1) > 0.1 for n, q in final.items()):
         calibrated += " (final model: " + ", ".join(
-            f"{n}={_fmt(q['value'])} ± {_fmt(q['std'])}" if q["status"] == "identified"
-            else f"{n} not determined" for n, q in final.items()) + ")"
+            _final_value(n, q) for n, q in final.items()) + ")"
     rms = ", ".join(f"{c} {_fmt(v['before'])} → {_fmt(v['after'])} {v['unit']}"
                     for c, v in row.get("rms", {}).items() if "before" in v) or "-"
     improvement = row.get("improvement")

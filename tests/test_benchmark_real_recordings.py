@@ -41,3 +41,13 @@ def test_zigzag_reader_and_linear_decay_fit(tmp_path):
     fit = bench.linear_decay_fit(time_, phi)
     assert fit["wn"] == pytest.approx(wn, rel=0.01)
     assert fit["zeta"] == pytest.approx(zeta, rel=0.01)
+
+
+def test_a_refitted_value_is_printed_with_its_std_unless_the_std_swamps_it():
+    identified = {"value": -0.124, "std": 0.005, "status": "identified"}
+    poor = {"value": -16.9, "std": 12.0, "status": "poorly identified (std 71% of the value)"}
+    lost = {"value": 3.08e6, "std": 2e7, "status": "poorly identified (std 649% of the value)"}
+    assert bench._final_value("K", identified) == "K=-0.124 ± 0.005"
+    assert bench._final_value("T", poor) == "T=-16.9 ± 12 (poorly identified)"
+    assert bench._final_value("T", lost) == "T not determined"
+    assert bench._final_value("T", {**lost, "std": math.inf}) == "T not determined"

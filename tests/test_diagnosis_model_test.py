@@ -167,6 +167,21 @@ def test_norrbin_damping_is_found_across_a_zigzag_series():
     assert "r³ - 0.0125 delta" in markdown(diagnosis)  # the report's final equation
 
 
+def test_a_course_unstable_ship_held_by_norrbin_damping_is_found_from_a_stable_start():
+    # T = -20 s: the linear yaw motion diverges and the r^3 term holds it; the fit starts from
+    # the default stable ship (T = 10 s) and has to cross T = infinity (1/T = 0) to reach it
+    series = [zigzag(a, c3=-30.0, K=0.25, T=-20.0, seed=k) for k, a in enumerate((10.0, 20.0))]
+    diagnosis = diagnose(series, "nomoto", calibrate="K,T")
+    top = diagnosis.findings[0]
+    assert (top.effect, top.target) == ("nonlinear_damping", "r")
+    assert top.standard_form["B1"] == pytest.approx(-1 / 20.0, rel=0.05)
+    assert top.standard_form["B3"] == pytest.approx(30.0, rel=0.05)
+    refitted = diagnosis.calibration_quality["with_findings"]
+    assert refitted["T"]["value"] == pytest.approx(-20.0, rel=0.05)
+    assert refitted["K"]["value"] == pytest.approx(0.25, rel=0.05)
+    assert refitted["T"]["status"] == "identified"
+
+
 def test_a_rudder_rate_limit_is_found_from_the_commanded_rudder():
     series = [zigzag(a, command=True, seed=k) for k, a in enumerate((10.0, 20.0))]
     diagnosis = diagnose(series, "nomoto", calibrate="K,T")
@@ -175,13 +190,24 @@ def test_a_rudder_rate_limit_is_found_from_the_commanded_rudder():
     assert math.degrees(top.parameters["rate"]) == pytest.approx(15.0, rel=0.3)
 
 
-def test_a_recorded_wind_moment_is_an_input_of_the_simulated_model():
-    # a slow yaw moment (period 60 s) swings the heading by several degrees: without its
-    # record the free simulation cannot follow; with it the nominal model explains the series
-    series = [zigzag(a, gust=0.003, seed=k) for k, a in enumerate((10.0, 20.0))]
-    blind = diagnose([Recording(r.data.drop(columns="w_r"), model="nomoto") for r in series],
-                     "nomoto", calibrate="K,T")
-    told = diagnose(series, "nomoto", calibrate="K,T")
+@pytest.fixture(scope="module")
+def windy_series() -> list[Recording]:
+    """Two zigzags swung by a slow yaw moment (period 60 s, several degrees of heading), its
+    record in the column ``w_r``."""
+    return [zigzag(a, gust=0.003, seed=k) for k, a in enumerate((10.0, 20.0))]
+
+
+@pytest.fixture(scope="module")
+def blind(windy_series):
+    """The windy series diagnosed without the wind's record."""
+    return diagnose([Recording(r.data.drop(columns="w_r"), model="nomoto")
+                     for r in windy_series], "nomoto", calibrate="K,T")
+
+
+def test_a_recorded_wind_moment_is_an_input_of_the_simulated_model(windy_series, blind):
+    # without its record the free simulation cannot follow; with it the nominal model
+    # explains the series
+    told = diagnose(windy_series, "nomoto", calibrate="K,T")
     assert told.measured_disturbances == ("w_r",)
     assert told.mismatch is False, told.summary()
     assert told.calibration["K"] == pytest.approx(-0.1, rel=0.05)
@@ -193,3 +219,16 @@ def test_a_series_must_measure_the_same_channels():
     b = Recording(b.data.drop(columns=["r"]), model="nomoto")
     with pytest.raises(ValueError, match="same channels"):
         diagnose([a, b], "nomoto")
+
+
+def test_an_unexplained_series_says_why_each_last_candidate_was_not_kept(blind):
+    # a slow yaw moment nobody recorded: no catalogue term follows it, and each candidate of
+    # the last round carries its reason (diverged, not significant or too small a gain)
+    assert blind.unexplained and blind.not_kept
+    reasons = ("diverges", "not significant", "not identifiable", "less than the 20%")
+    for tried in blind.not_kept:
+        assert any(reason in tried["reason"] for reason in reasons), tried
+    assert {t["candidate"] for t in blind.not_kept} >= {"nonlinear_damping(r)", "current(r)"}
+    assert blind.to_dict()["not_kept"] == blind.not_kept
+    assert "not kept: current(r)" in blind.summary()
+    assert "why none was kept" in markdown(blind)

@@ -46,7 +46,7 @@ def test_linearize_matches_finite_differences(delta0):
     np.testing.assert_allclose(A, [[-1 / 7.0, 0], [1, 0]])
 
 
-@pytest.mark.parametrize(("name", "value"), [("T", 0.0), ("T", -1.0), ("T", math.nan),
+@pytest.mark.parametrize(("name", "value"), [("T", 0.0), ("T", math.inf), ("T", math.nan),
                                              ("K", 0.0), ("K", math.nan), ("K", math.inf),
                                              ("delta0", math.nan), ("delta_max", 0.0)])
 def test_invalid_params_are_refused_naming_the_parameter(name, value):

@@ -36,7 +36,7 @@ from marine_envs.recording import Recording, read_recording
 from . import feedback
 from .explain import explain, separating_test
 from .model_test import diagnose_series
-from .output_error import parameter_bounds, term_label
+from .output_error import Coordinates, parameter_bounds, term_label
 from .residuals import Residuals, equation_error, estimate, white_noise_std
 from .result import Diagnosis, Finding
 from .rollout import Rollouts
@@ -335,10 +335,12 @@ def _equation_fit(residuals: Residuals, values: dict[str, float]
     if not free:
         return values, free, True
     low, high = parameter_bounds(vehicle, free)
-    start = np.clip([values[n] for n in free], low, high)
-    fit = optimize.least_squares(errors, start, bounds=(low, high), x_scale="jac",
-                                 args=(free,))
-    return {**values, **dict(zip(free, fit.x.tolist(), strict=True))}, free, bool(fit.success)
+    coordinates = Coordinates(vehicle, free, range(len(free)))  # a lag may turn unstable
+    start = coordinates.solver(np.clip([values[n] for n in free], low, high))
+    fit = optimize.least_squares(lambda z: errors(coordinates.unknowns(z), free), start,
+                                 bounds=coordinates.bounds(low, high), x_scale="jac")
+    fitted = coordinates.unknowns(fit.x)
+    return {**values, **dict(zip(free, fitted.tolist(), strict=True))}, free, bool(fit.success)
 
 
 # -- locate ---------------------------------------------------------------------------------------

@@ -38,6 +38,8 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 #: Points of each actuator effect's grid.
 GRID = 12
+#: Unknowns correlated beyond this cannot be told apart by the records.
+MAX_CORRELATION = 0.98
 
 
 @dataclass(frozen=True)
@@ -137,6 +139,29 @@ class Comparison:
             return None
         excess = max(before.mean_square - self.noise_floor, 1e-3 * before.mean_square, 1e-300)
         return min((before.mean_square - after.mean_square) / excess, 1.0)
+
+    def refusal(self, scored: Scored, before: HeldOut) -> str | None:
+        """Why ``scored`` is not accepted over a model whose held-out error is ``before``
+        (None: it is acceptable): it diverges, its coefficient is not significant, or it
+        removes less than ``min_gain`` of the held-out error in excess of the noise."""
+        if scored.held_out.diverged:
+            return "its free simulation diverges on the held-out data"
+        if not _significant(scored):
+            return _insignificant(scored)
+        gain = self.improvement(before, scored.held_out)
+        if before.mean_square - scored.held_out.mean_square < self.config.min_gain * max(
+                before.mean_square - self.noise_floor, 0.0):
+            return (f"it removes {max(gain or 0.0, 0.0):.0%} of the held-out error beyond the "
+                    f"noise, less than the {self.config.min_gain:.0%} a term must")
+        return None
+
+    def not_kept(self) -> list[tuple[Scored, str]]:
+        """The candidates of the round that ended the search without a term, best first,
+        each with its :meth:`refusal` (empty when the search ended for another reason)."""
+        if len(self.rounds) == len(self.accepted):
+            return []
+        before = self.final_held_out
+        return [(s, self.refusal(s, before) or "") for s in self.rounds[-1]]
 
     def explained(self) -> bool:
         """The final model's held-out error is within ``noise_factor`` of the sensor noise."""
@@ -242,10 +267,10 @@ def held_out(structure: Structure, theta: FloatArray, config: ComparisonConfig) 
             rest = np.setdiff1d(np.arange(structure.size), own)
             fitted = fit(structure, alone, others, fixed=rest).theta
             errors.append((structure.simulate(fitted, r)[0] - run.y) / series.scale)
+    diverged = any(not np.all(np.abs(e) <= 1e2) for e in errors)  # NaN too
+    errors = [np.clip(np.nan_to_num(e, nan=1e2), -1e2, 1e2) for e in errors]
     per_run = [float(np.mean(e**2)) for e in errors]
     stacked = np.concatenate(errors)
-    diverged = not np.all(np.isfinite(stacked)) or float(np.max(np.abs(stacked))) > 1e2
-    stacked = np.nan_to_num(stacked, nan=1e2, posinf=1e2, neginf=-1e2)
     rmse = {c: float(np.sqrt(np.mean(stacked[:, j] ** 2)) * series.scale[j])
             for j, c in enumerate(series.channels)}
     return HeldOut(float(np.mean(per_run)) if not diverged else math.inf, rmse,
@@ -279,9 +304,7 @@ def compare(series: Series, names: Sequence[str] = (),
         scored = sorted((_score(current, current_fit, c, config) for c in ranked),
                         key=lambda s: s.held_out.mean_square)
         comparison.rounds.append(scored)
-        needed = config.min_gain * max(score.mean_square - comparison.noise_floor, 0.0)
-        best = next((s for s in scored if not s.held_out.diverged and _significant(s)
-                     and score.mean_square - s.held_out.mean_square >= needed), None)
+        best = next((s for s in scored if comparison.refusal(s, score) is None), None)
         if best is None:
             break
         comparison.accepted.append(best)
@@ -292,11 +315,27 @@ def compare(series: Series, names: Sequence[str] = (),
 def _significant(scored: Scored, t: float = 2.0) -> bool:
     """The term's fitted coefficient is at least ``t`` standard deviations from zero (a grid
     member of an actuator effect has no coefficient: its held-out gain is its test)."""
-    term = scored.candidate.term
-    if term.kind == "input":
+    if scored.candidate.term.kind == "input":
         return True
-    k = scored.fit.structure.labels().index(term_label(term))
+    k = scored.fit.structure.labels().index(scored.candidate.label)
     return abs(float(scored.fit.theta[k])) >= t * float(scored.fit.std[k])
+
+
+def _insignificant(scored: Scored) -> str:
+    """Why a term's coefficient is not significant: its value and std, and the unknown it is
+    most correlated with when the records cannot tell the two apart."""
+    fit, labels = scored.fit, scored.fit.structure.labels()
+    k = labels.index(scored.candidate.label)
+    if not math.isfinite(fit.std[k]):
+        return "its coefficient is not identifiable: the records hold it only together with " \
+            "other unknowns"
+    text = f"its coefficient is not significant ({fit.theta[k]:.3g} ± {fit.std[k]:.2g})"
+    others = [j for j in range(len(labels)) if j != k]
+    j = max(others, key=lambda j: abs(fit.correlation[k, j]), default=None)
+    if j is not None and abs(fit.correlation[k, j]) > MAX_CORRELATION:
+        text += (f": correlated {fit.correlation[k, j]:+.2f} with {labels[j]}, which the "
+                 "records cannot tell it from")
+    return text
 
 
 def extend(structure: Structure, candidate: Candidate) -> Structure:

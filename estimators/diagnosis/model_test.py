@@ -23,7 +23,7 @@ from marine_envs.models import VehicleModel
 from marine_envs.models.effects import Effect
 from marine_envs.recording import Recording
 
-from .comparison import Comparison, ComparisonConfig, HeldOut, Scored, compare
+from .comparison import MAX_CORRELATION, Comparison, ComparisonConfig, HeldOut, Scored, compare
 from .explain import describe, separating_test
 from .modes import check_modes, free_decays, mode_start
 from .output_error import Fit, Series, term_label
@@ -31,8 +31,6 @@ from .result import Diagnosis, Finding
 
 #: A parameter whose standard deviation exceeds this share of its value is not identified.
 MAX_RELATIVE_STD = 0.5
-#: Parameters correlated beyond this cannot be told apart by the records.
-MAX_CORRELATION = 0.98
 #: A held-out mean square error beyond this share of the signal's variance: free simulation
 #: does not follow the records at all (they are driven by what the model is not given).
 MAX_UNFOLLOWED = 0.5
@@ -120,6 +118,7 @@ def _diagnosis(comparison: Comparison, calibrate: Sequence[str],
     }
     if not explained:
         diagnosis.unexplained = _unexplained(comparison)
+        diagnosis.not_kept = _not_kept(comparison)
     diagnosis.alternatives = _alternatives(comparison)
     return diagnosis
 
@@ -225,6 +224,18 @@ def _tied(comparison: Comparison, scored: Scored) -> bool:
     """Another candidate of its round explains the held-out data as well."""
     return any(_equal(comparison, scored, other) for round_ in comparison.rounds
                if any(s is scored for s in round_) for other in round_ if other is not scored)
+
+
+def _not_kept(comparison: Comparison) -> list[dict[str, Any]]:
+    """The last round's candidates, each with its share of the remaining held-out error and
+    why it was not kept."""
+    before = comparison.final_held_out
+    out = []
+    for scored, reason in comparison.not_kept():
+        share = comparison.improvement(before, scored.held_out)
+        out.append({"candidate": scored.candidate.label, "reason": reason,
+                    "improvement": "diverged" if share is None else round(share, 4)})
+    return out
 
 
 def _alternatives(comparison: Comparison) -> list[dict[str, Any]]:

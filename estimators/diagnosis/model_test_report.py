@@ -338,11 +338,17 @@ def _unexplained(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
     units = _units(diagnosis)
     rows = [f"| {c} | {with_degrees(v['rmse'], units.get(c, ''))} | "
             f"{_percent(v['share_of_signal'])} |" for c, v in diagnosis.unexplained.items()]
-    return out + [f"The final model's held-out free-simulation error stays above {factor:g}× "
-                  "the sensor noise: physics neither the model nor the catalogue holds (or a "
-                  "term whose coefficient changes between the fitted and held-out parts).", "",
-                  "| channel | RMS held-out error | share of the signal's RMS |",
-                  "| --- | ---: | ---: |", *rows, ""]
+    out += [f"The final model's held-out free-simulation error stays above {factor:g}× "
+            "the sensor noise: physics neither the model nor the catalogue holds (or a "
+            "term whose coefficient changes between the fitted and held-out parts).", "",
+            "| channel | RMS held-out error | share of the signal's RMS |",
+            "| --- | ---: | ---: |", *rows, ""]
+    if diagnosis.not_kept:
+        out += ["The candidates of the last round, and why none was kept:", "",
+                "| candidate | held-out improvement | why not kept |", "| --- | ---: | --- |",
+                *(f"| `{t['candidate']}` | {_percent(t['improvement'])} | {t['reason']} |"
+                  for t in diagnosis.not_kept), ""]
+    return out
 
 
 def how_to_read(comparison: Comparison) -> str:

@@ -397,51 +397,129 @@ class Fit:
 def fit(structure: Structure, rows: Sequence[BoolArray | None],
         theta0: FloatArray | None = None, fixed: Sequence[int] = ()) -> Fit:
     """Fit the unknowns of ``structure`` to the selected samples (bounded trust region, exact
-    batched central-difference Jacobian); ``fixed`` unknowns keep their ``theta0`` values."""
+    batched central-difference Jacobian, a lag's gain and time constant moved as
+    :class:`Coordinates`); ``fixed`` unknowns keep their ``theta0`` values."""
     theta0 = structure.start() if theta0 is None else np.asarray(theta0, dtype=float)
     free = np.setdiff1d(np.arange(structure.size), np.asarray(fixed, dtype=int))
+    if not free.size:
+        r = structure.residuals(theta0[None], rows)[0]
+        return Fit(structure, theta0, float(r @ r), np.zeros(0), np.zeros((0, 0)), True, "",
+                   np.zeros((0, 0)))
+    coordinates = Coordinates(structure.series.model, structure.labels(), free.tolist())
     low, high = structure.bounds()
+    start = theta0.copy()
+    start[free] = np.clip(theta0[free], low[free], high[free])
+    z_start = coordinates.solver(start)
+    low, high = coordinates.bounds(low, high)
     cache: dict[bytes, tuple[FloatArray, FloatArray]] = {}
 
     def full(z: FloatArray) -> FloatArray:
-        theta = theta0.copy()
-        theta[free] = z
-        return theta
+        out = z_start.copy()
+        out[free] = z
+        return out
 
     def evaluate(z: FloatArray) -> tuple[FloatArray, FloatArray]:
         key = z.tobytes()
         if key not in cache:
             cache.clear()
-            cache[key] = jacobian(structure, full(z), rows, free)
+            cache[key] = jacobian(structure, coordinates.unknowns(full(z)), rows, free,
+                                  coordinates)
         return cache[key]
 
-    z0 = np.clip(theta0[free], low[free], high[free])
-    if not free.size:
-        r, J = structure.residuals(theta0[None], rows)[0], np.zeros((0, 0))
-        return Fit(structure, theta0, float(r @ r), np.zeros(0), np.zeros((0, 0)), True, "", J)
+    z0 = np.clip(z_start[free], low[free], high[free])
     result = optimize.least_squares(lambda z: evaluate(z)[0], z0, jac=lambda z: evaluate(z)[1],
                                     bounds=(low[free], high[free]), method="trf",
                                     x_scale="jac", max_nfev=60, ftol=1e-6, xtol=1e-6)
-    r, J = evaluate(result.x)
+    r, J_solver = evaluate(result.x)
+    theta = coordinates.unknowns(full(result.x))
+    J = J_solver @ coordinates.derivative(theta)[np.ix_(free, free)]  # per unknown
     std, correlation = _covariance(r, J, structure, rows)
     std_full = np.zeros(structure.size)
     std_full[free] = std
     corr_full = np.eye(structure.size)
     corr_full[np.ix_(free, free)] = correlation
-    return Fit(structure, full(result.x), float(r @ r), std_full, corr_full,
+    return Fit(structure, theta, float(r @ r), std_full, corr_full,
                bool(result.success and np.all(np.abs(r) < DIVERGED)), result.message, J)
 
 
+class Coordinates:
+    """The unknowns as the solver moves them: a model's lag time constant ``T`` as ``1/T`` and,
+    when free with it, the lag's gain ``K`` as ``K/T`` (:attr:`VehicleModel.lag_parameters`);
+    every other unknown as itself. ``K/T`` and ``1/T`` are the coefficients of the equation,
+    smooth where the lag turns unstable: a fit can cross from a stable ship to a course-unstable
+    one (``T`` through infinity, where ``K`` and ``T`` alone are undefined)."""
+
+    #: ``|1/T|`` is kept above this (1/s): ``T`` stays finite.
+    SMALLEST_RATE = 1e-12
+
+    def __init__(self, model: VehicleModel, labels: Sequence[str], free: Sequence[int]) -> None:
+        """``labels``: a name per unknown; ``free``: the positions the solver moves."""
+        lag, labels = model.lag_parameters, list(labels)
+        index = {n: labels.index(n) for n in lag or () if n in labels and labels.index(n) in free}
+        self.t = index.get(lag[1]) if lag else None
+        self.k = index.get(lag[0]) if lag and self.t is not None else None
+
+    def solver(self, theta: FloatArray) -> FloatArray:
+        """The solver's coordinates of unknowns ``theta`` (``(..., P)``)."""
+        z = np.array(theta, dtype=float)
+        if self.t is not None:
+            z[..., self.t] = 1 / theta[..., self.t]
+            if self.k is not None:
+                z[..., self.k] = theta[..., self.k] / theta[..., self.t]
+        return z
+
+    def unknowns(self, z: FloatArray) -> FloatArray:
+        """The unknowns at solver coordinates ``z`` (``(..., P)``)."""
+        theta = np.array(z, dtype=float)
+        if self.t is not None:
+            rate = z[..., self.t]
+            rate = np.where(np.abs(rate) < self.SMALLEST_RATE,
+                            np.copysign(self.SMALLEST_RATE, rate), rate)
+            theta[..., self.t] = 1 / rate
+            if self.k is not None:
+                theta[..., self.k] = z[..., self.k] / rate
+        return theta
+
+    def derivative(self, theta: FloatArray) -> FloatArray:
+        """``dz/dtheta`` ``(P, P)`` at unknowns ``theta`` (a solver Jacobian times it is the
+        Jacobian per unknown)."""
+        D = np.eye(len(theta))
+        if self.t is not None:
+            t = theta[self.t]
+            D[self.t, self.t] = -1 / t**2
+            if self.k is not None:
+                D[self.k, self.k] = 1 / t
+                D[self.k, self.t] = -theta[self.k] / t**2
+        return D
+
+    def bounds(self, low: FloatArray, high: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Bounds in solver coordinates: a positive ``T`` keeps ``1/T`` (and, with ``K``
+        positive, ``K/T``) positive; otherwise free."""
+        low, high = low.copy(), high.copy()
+        for i, positive in ((self.t, self.t is not None and low[self.t] >= 0),
+                            (self.k, self.k is not None and low[self.k] >= 0
+                             and self.t is not None and low[self.t] >= 0)):
+            if i is not None:
+                low[i], high[i] = (0.0 if positive else -np.inf), np.inf
+        return low, high
+
+
 def jacobian(structure: Structure, theta: FloatArray, rows: Sequence[BoolArray | None],
-             free: NDArray[np.int_] | None = None) -> tuple[FloatArray, FloatArray]:
+             free: NDArray[np.int_] | None = None, coordinates: Coordinates | None = None
+             ) -> tuple[FloatArray, FloatArray]:
     """Residuals ``(L,)`` and their central-difference Jacobian ``(L, len(free))`` (default:
-    every unknown) from one batched simulation."""
+    every unknown; with respect to the ``coordinates``' solver coordinates when given) from one
+    batched simulation."""
     free = np.arange(structure.size) if free is None else free
-    steps = 1e-6 * np.maximum(np.abs(theta[free]), 1e-3)
-    batch = np.tile(theta, (1 + 2 * len(free), 1))
+    z = theta if coordinates is None else coordinates.solver(theta)
+    steps = 1e-6 * np.maximum(np.abs(z[free]), 1e-3)
+    batch = np.tile(z, (1 + 2 * len(free), 1))
     for k, (i, s) in enumerate(zip(free, steps, strict=True)):
         batch[1 + 2 * k, i] += s
         batch[2 + 2 * k, i] -= s
+    if coordinates is not None:
+        batch = coordinates.unknowns(batch)
+        batch[0] = theta
     r = structure.residuals(batch, rows)
     return r[0], ((r[1::2] - r[2::2]) / (2 * steps[:, None])).T
 

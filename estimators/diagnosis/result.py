@@ -66,6 +66,8 @@ class Diagnosis:
     calibration_quality: dict[str, Any] = field(default_factory=dict)
     unexplained: dict[str, Any] = field(default_factory=dict)
     alternatives: list[dict[str, Any]] = field(default_factory=list)
+    #: with ``unexplained``: the candidates of the search's last round and why none was kept
+    not_kept: list[dict[str, Any]] = field(default_factory=list)
     #: recorded disturbances the model took as known inputs (a logged wind, current, command)
     measured_disturbances: tuple[str, ...] = ()
     residuals: Residuals | None = field(default=None, repr=False)
@@ -88,7 +90,8 @@ class Diagnosis:
             out["reason"] = self.reason
         if self.calibration:
             out["calibration"] = self.calibration
-        for key in ("calibration_quality", "model_check", "unexplained", "alternatives"):
+        for key in ("calibration_quality", "model_check", "unexplained", "not_kept",
+                    "alternatives"):
             if getattr(self, key):
                 out[key] = getattr(self, key)
         if self.measured_disturbances:
@@ -148,6 +151,8 @@ class Diagnosis:
         for channel, left in self.unexplained.items():
             lines.append(f"  unexplained in {channel}: {_with_unit(left['rmse'], left['unit'])}"
                          f" RMS held-out ({left['share_of_signal']:.0%} of the signal)")
+        lines += [f"  not kept: {tried['candidate']} ({_gain(tried['improvement'])}): "
+                  f"{tried['reason']}" for tried in self.not_kept]
         for alt in self.alternatives:
             values = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
                                for k, v in alt.get("parameters", {}).items())
@@ -155,6 +160,16 @@ class Diagnosis:
                          f"data as well as {alt['chosen']}; to separate them: "
                          f"{alt['separate_by']}")
         return "\n".join(lines + withdrawn)
+
+
+def _gain(share: float | str) -> str:
+    """A held-out improvement as words: "removes 33%", "removes nothing", "worse by 51%" or
+    "diverged"."""
+    if isinstance(share, str):
+        return share
+    if abs(share) < 0.005:
+        return "removes nothing"
+    return f"removes {share:.0%}" if share > 0 else f"worse by {-share:.0%}"
 
 
 def _forcing_dict(f: Forcing, model: Any) -> dict[str, Any]:

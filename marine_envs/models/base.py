@@ -54,6 +54,10 @@ class VehicleModel(ABC):
     #: motion), driven by unit-intensity white disturbances: the model states their statistics,
     #: so a diagnosis takes their process noise from the model and looks for no term in them.
     noise_model_states: ClassVar[tuple[str, ...]] = ()
+    #: The gain and time constant ``(K, T)`` of a first-order lag ``T x' + x = K u`` in the
+    #: model: fits move them as ``K/T`` and ``1/T``, which stay finite where the lag turns
+    #: unstable (``1/T`` through 0, ``T`` through infinity).
+    lag_parameters: ClassVar[tuple[str, str] | None] = None
 
     @property
     def actuator_names(self) -> tuple[str, ...]:

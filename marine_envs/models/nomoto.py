@@ -31,16 +31,19 @@ class NomotoParams:
 
     #: rudder-to-yaw-rate gain, 1/s; either sign, nonzero (< 0: port rudder turns to port)
     K: float = -0.08  # [PROPOSED: typical large tanker, model scale]
-    T: float = 10.0  #: yaw time constant, s  [PROPOSED: typical large tanker, model scale]
+    #: yaw time constant, s; either sign, nonzero (< 0: a course-unstable ship, whose linear yaw
+    #: motion diverges unless a nonlinear damping such as Norrbin's holds it)
+    T: float = 10.0  # [PROPOSED: typical large tanker, model scale]
     #: rudder offset, rad: the rudder -delta0 holds a straight course
     delta0: float = 0.0  # [PROPOSED: symmetric ship, no offset]
     delta_max: float = math.radians(35.0)  #: rudder limit, rad  [PROPOSED: usual +-35 deg]
 
     def __post_init__(self) -> None:
-        for name in ("T", "delta_max"):
+        require(math.isfinite(self.delta_max) and self.delta_max > 0, "delta_max",
+                self.delta_max, "must be finite and > 0")
+        for name in ("K", "T"):
             value = getattr(self, name)
-            require(math.isfinite(value) and value > 0, name, value, "must be finite and > 0")
-        require(math.isfinite(self.K) and self.K != 0, "K", self.K, "must be finite and nonzero")
+            require(math.isfinite(value) and value != 0, name, value, "must be finite and nonzero")
         require(math.isfinite(self.delta0), "delta0", self.delta0, "must be finite")
 
 
@@ -61,6 +64,7 @@ class NomotoModel(VehicleModel):
     affine_parameters: ClassVar[frozenset[str]] = frozenset({"delta0"})
     #: ``rhs`` reads K, T, delta0 at call time with numpy arithmetic: one value per row works.
     row_parameters: ClassVar[bool] = True
+    lag_parameters: ClassVar[tuple[str, str]] = ("K", "T")
 
     def __init__(self, params: NomotoParams | None = None) -> None:
         super().__init__(NomotoParams() if params is None else params)
