@@ -87,8 +87,12 @@ def test_component_variance_matches_hs(hs):
     assert 4 * math.sqrt(variance) == pytest.approx(hs, rel=2e-3)
 
 
-def test_batch_equals_single_realisations():
-    sea, midway, steps = SeaState(hs=2.0, tp=8.0), BLOCK + 44, 2 * BLOCK + 200
+@pytest.mark.parametrize("sea", [SeaState(hs=2.0, tp=8.0),
+                                 SeaState(hs=[(0, 1.0), (30, 1.0), (40, 3.0)], tp=None)],
+                         ids=["pm", "pm-shape-follows-hs"])
+def test_batch_equals_single_realisations(sea):
+    # a boat reset midway starts its blocks at other times than the rest of the batch
+    midway, steps = BLOCK + 44, 2 * BLOCK + 200
     batch = WaveRealisation(sea, dt=DT)
     batch.bind(3)
     batch.reset(np.arange(3), [np.random.default_rng(10 + i) for i in range(3)])

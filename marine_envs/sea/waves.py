@@ -27,7 +27,8 @@ commensurate (a uniform grid would repeat the record every ``2 pi / d_omega`` se
 
 A significant wave height that varies in time (:class:`Schedule`) scales the amplitudes each step;
 when the spectral shape itself follows Hs (the one-parameter PM, ``tp=None``) the amplitudes are
-tabulated over Hs and interpolated.
+tabulated over Hs and interpolated, and boats whose blocks start at the same time share one
+matrix product (a reset boat starts again at 0 s, where others have been).
 """
 
 from __future__ import annotations
@@ -44,6 +45,8 @@ from ..blocks import BLOCK, BlockStream
 from .spectra import MeasuredSpectrum, jonswap, pierson_moskowitz
 
 G = 9.81  #: gravity, m/s^2
+#: Block start times whose Hs-shaped weights are kept (each ``2n x BLOCK x channels`` floats).
+SHAPED_CACHE = 8
 _GOLDEN = (math.sqrt(5) - 1) / 2
 Coupling = Callable[[NDArray[np.float64]], NDArray[np.complex128]]
 
@@ -234,6 +237,7 @@ class WaveRealisation:
         response = np.asarray(coupling(self.omega), dtype=complex)
         self.n_channels = self._stream.width = response.shape[1]
         self._hs_grid: NDArray[np.float64] | None = None
+        self._shaped_cache: dict[float, NDArray[np.float64]] = {}
         if sea.varying and sea.shape_follows_hs:
             # amplitudes tabulated over Hs (2 % steps) and interpolated in between
             lo, hi = sea.hs_range()
@@ -282,20 +286,37 @@ class WaveRealisation:
             if self.sea.varying:
                 values = values * self.sea.hs(times)[:, :, None]  # type: ignore[operator]
         else:
-            values = np.stack([self._shaped_block(i, t) for i, t in zip(idx, times, strict=True)])
+            # boats whose blocks start at the same time share the Hs-shaped weights: one real
+            # matrix product per start time
+            values = np.empty((k, BLOCK, c))
+            starts, group = np.unique(self.block_time[idx], return_inverse=True)
+            for g, start in enumerate(starts):
+                members = np.flatnonzero(group == g)
+                phasors = self.phasor[idx[members]]
+                values[members] = (np.hstack([phasors.real, phasors.imag])
+                                   @ self._shaped_weights(float(start))).reshape(-1, BLOCK, c)
         self.phasor[idx] *= self._block_rotation
         self.block_time[idx] += BLOCK * self.dt
         return values
 
-    def _shaped_block(self, i: int, times: NDArray[np.float64]) -> NDArray[np.float64]:
-        """One boat's block when the spectral shape follows a time-varying Hs."""
-        hs = self.sea.hs(times)  # type: ignore[operator]
-        pos = np.interp(hs, self._hs_grid, np.arange(self._hs_grid.size))
-        j = np.minimum(pos.astype(np.intp), self._hs_grid.size - 2)
-        w = (pos - j)[:, None, None]
-        gain = (1 - w) * self._gain_table[j] + w * self._gain_table[j + 1]  # (BLOCK, n, c)
-        phasors = self.phasor[i] * self._rotations  # (BLOCK, n)
-        return np.einsum("kn,knc->kc", phasors, gain).real
+    def _shaped_weights(self, start: float) -> NDArray[np.float64]:
+        """The weights ``(2n, BLOCK * c)`` of a block starting at ``start`` (s) when the spectral
+        shape follows a time-varying Hs: ``[Re Z, Im Z] @ weights`` is ``Re(sum_j Z_j(t)
+        G_jc(Hs(t)))`` for phasors ``Z`` at the block's start. A few recent start times are
+        kept (boats reset together share them)."""
+        if start not in self._shaped_cache:
+            times = start + self._step_times
+            hs = self.sea.hs(times)  # type: ignore[operator]
+            pos = np.interp(hs, self._hs_grid, np.arange(self._hs_grid.size))
+            j = np.minimum(pos.astype(np.intp), self._hs_grid.size - 2)
+            w = (pos - j)[:, None, None]
+            gain = (1 - w) * self._gain_table[j] + w * self._gain_table[j + 1]  # (BLOCK, n, c)
+            weights = self._rotations[:, :, None] * gain  # (BLOCK, n, c)
+            stacked = np.concatenate([weights.real, -weights.imag], axis=1)  # (BLOCK, 2n, c)
+            if len(self._shaped_cache) >= SHAPED_CACHE:
+                del self._shaped_cache[next(iter(self._shaped_cache))]  # the oldest
+            self._shaped_cache[start] = stacked.transpose(1, 0, 2).reshape(stacked.shape[1], -1)
+        return self._shaped_cache[start]
 
     def sample(self, n_steps: int, rng: np.random.Generator) -> NDArray[np.float64]:
         """One boat's realisation over ``n_steps`` steps (n_steps x channels), for analysis."""
