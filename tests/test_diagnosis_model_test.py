@@ -12,7 +12,7 @@ import pytest
 from estimators.diagnosis import diagnose
 from estimators.diagnosis.model_test_report import markdown
 from estimators.diagnosis.modes import decay_analysis, model_modes, nearest_mode
-from estimators.diagnosis.output_error import Series, Structure, basis
+from estimators.diagnosis.output_error import Coordinates, Series, Structure, basis
 from marine_envs.models import get_model
 from marine_envs.models.effects import Effect, EffectModel
 from marine_envs.models.integrate import rk4
@@ -165,6 +165,21 @@ def test_norrbin_damping_is_found_across_a_zigzag_series():
     assert top.standard_form["B3"] == pytest.approx(3.0, rel=0.1)
     assert top.standard_form["G_delta"] == pytest.approx(-0.1 / 8.0, rel=0.05)
     assert "r³ - 0.0125 delta" in markdown(diagnosis)  # the report's final equation
+
+
+def test_a_lag_is_fitted_in_coordinates_that_pass_through_instability():
+    coordinates = Coordinates(get_model("nomoto"), ["K", "T", "r0[0]"], [0, 1, 2])
+    theta = np.array([-0.1, 8.0, 0.01])
+    np.testing.assert_allclose(coordinates.solver(theta), [-0.1 / 8.0, 1 / 8.0, 0.01])
+    np.testing.assert_allclose(coordinates.unknowns(coordinates.solver(theta)), theta)
+    eps, D = 1e-7, coordinates.derivative(theta)
+    numeric = np.stack([(coordinates.solver(theta + eps * e) - coordinates.solver(theta - eps * e))
+                        / (2 * eps) for e in np.eye(3)], axis=1)
+    np.testing.assert_allclose(D, numeric, rtol=1e-6, atol=1e-12)
+    # 1/T through zero: the same gain K/T on both sides, T from +inf to -inf, never infinite
+    near = coordinates.unknowns(np.array([[-0.0125, 1e-15, 0.0], [-0.0125, -1e-15, 0.0]]))
+    assert np.all(np.isfinite(near)) and near[0, 1] > 0 > near[1, 1]
+    np.testing.assert_allclose(near[:, 0] / near[:, 1], -0.0125)
 
 
 def test_a_course_unstable_ship_held_by_norrbin_damping_is_found_from_a_stable_start():

@@ -496,11 +496,13 @@ class Coordinates:
         """Bounds in solver coordinates: a positive ``T`` keeps ``1/T`` (and, with ``K``
         positive, ``K/T``) positive; otherwise free."""
         low, high = low.copy(), high.copy()
-        for i, positive in ((self.t, self.t is not None and low[self.t] >= 0),
-                            (self.k, self.k is not None and low[self.k] >= 0
-                             and self.t is not None and low[self.t] >= 0)):
-            if i is not None:
-                low[i], high[i] = (0.0 if positive else -np.inf), np.inf
+        if self.t is None:
+            return low, high
+        positive = low[self.t] >= 0
+        low[self.t], high[self.t] = (0.0 if positive else -np.inf), np.inf
+        if self.k is not None:
+            low[self.k] = 0.0 if positive and low[self.k] >= 0 else -np.inf
+            high[self.k] = np.inf
         return low, high
 
 
