@@ -1,7 +1,6 @@
 """The report of a model-test diagnosis (free simulation): Markdown, figures and JSON."""
 
 import json
-import time
 
 import numpy as np
 import pandas as pd
@@ -43,14 +42,11 @@ def roll_decay(seed: int = 0) -> Recording:
 
 @pytest.fixture(scope="module")
 def decay_diagnosis():
-    start = time.perf_counter()
-    diagnosis = diagnose(roll_decay(), "usv", calibrate="wn,zeta", method="free")
-    return diagnosis, time.perf_counter() - start
+    return diagnose(roll_decay(), "usv", calibrate="wn,zeta", method="free")
 
 
 def test_free_decay_report_has_its_sections_figures_and_json(decay_diagnosis, tmp_path):
-    diagnosis, seconds = decay_diagnosis
-    assert seconds < 20.0
+    diagnosis = decay_diagnosis
     assert diagnosis.comparison is not None and diagnosis.mismatch is True
     assert [(f.effect, f.target) for f in diagnosis.findings] == [("quadratic_damping", "p")]
     report = write_report(diagnosis, tmp_path / "out", "decay.csv")
