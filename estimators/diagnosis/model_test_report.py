@@ -164,9 +164,8 @@ def _calibration(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
     parameters = quality.get("parameters", {})
     if not parameters:
         return []
-    final = comparison.final
-    with_terms = bool(comparison.accepted)
-    labels = final.structure.labels()
+    refitted = quality.get("with_findings", {})  # the final model's fit of the same names
+    with_terms = bool(refitted)
     header = "| parameter | as set | calibrated (± std) |" + (" with the findings (± std) |"
                                                               if with_terms else "") \
         + " status |"
@@ -176,10 +175,10 @@ def _calibration(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
                f"{num(q['value'])} ± {num(q['std'])} |")
         status = q["status"]
         if with_terms:
-            k = labels.index(name)
-            row += f" {num(float(final.theta[k]))} ± {num(float(final.std[k]))} |"
-            refitted = quality.get("with_findings", {}).get(name, {}).get("status", "identified")
-            status += "" if refitted == "identified" else f"; with the findings {refitted}"
+            final = refitted[name]
+            row += f" {num(final['value'])} ± {num(final['std'])} |"
+            if final["status"] != "identified":
+                status += f"; with the findings {final['status']}"
         rows.append(row + f" {cell(status)} |")
     out = ["## Calibrated parameters", "",
            "Fitted by output error (free simulation of "
