@@ -39,6 +39,17 @@ class BlockStream:
         self._one = np.ones(1, dtype=self.cursor.dtype)
         self._countdown = BLOCK  # steps until the first boat runs out
 
+    def __getstate__(self) -> dict:
+        # a copy of `rows` would no longer be a view of `blocks` (refills would not show)
+        state = self.__dict__.copy()
+        state.pop("rows", None)
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        if "blocks" in state:
+            self.rows = self.blocks.reshape(-1, self.width)
+
     def restart(self, idx: NDArray[np.intp]) -> None:
         """Refill boats ``idx`` from their signal's current state (call at episode start)."""
         self._refill(idx)
@@ -53,13 +64,28 @@ class BlockStream:
         else:
             values = self.rows.take(self.cursor, axis=0)
             self.cursor = self.cursor + self._one  # array operands: cheaper than += 1
+        self.advanced()
+        return values
+
+    def refill_exhausted(self) -> None:
+        """Refill the boats whose block compiled code used up (it reads ``rows[cursor]`` and
+        moves ``cursor`` itself)."""
+        self._refill(np.flatnonzero(self.cursor - self.first_row == BLOCK))
+
+    def advanced(self) -> None:
+        """Account for one row of every boat taken by compiled code, which read ``rows[cursor]``
+        and advanced ``cursor`` itself (what :meth:`next` does, but the reading)."""
         self._countdown -= 1
         if self._countdown == 0:
             self._refill(np.flatnonzero(self.cursor - self.first_row == BLOCK))
-        return values
 
     def _refill(self, idx: NDArray[np.intp]) -> None:
         if idx.size:
             self.blocks[idx] = self.fill(idx)
             self.cursor[idx] = self.first_row[idx]
+        self.recount()
+
+    def recount(self) -> None:
+        """Count the steps until the first boat runs out anew (after compiled code moved the
+        cursors, which keeps no count)."""
         self._countdown = BLOCK - int((self.cursor - self.first_row).max())

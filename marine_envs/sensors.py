@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .blocks import BLOCK, BlockStream
+from .compiled import jit
 
 FloatArray = NDArray[np.float64]
 
@@ -72,7 +73,8 @@ class _RandomStage(Stage):
     generator so that a boat's draws never depend on the other boats of the batch."""
 
     def __init__(self, width: int) -> None:
-        self._stream = BlockStream(width, self._draw_blocks)
+        #: The rows, a block at a time per boat (read by the compiled step kernel too).
+        self.stream = BlockStream(width, self._draw_blocks)
 
     @abstractmethod
     def _draw(self, rng: np.random.Generator) -> FloatArray:
@@ -82,13 +84,13 @@ class _RandomStage(Stage):
         return np.stack([self._draw(self._rngs[i]) for i in idx])
 
     def bind(self, batch_size: int) -> None:
-        self._stream.bind(batch_size)
+        self.stream.bind(batch_size)
         self._rngs: list[np.random.Generator] = [np.random.default_rng(0)] * batch_size
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         for i, rng in zip(idx, rngs, strict=True):
             self._rngs[i] = rng
-        self._stream.restart(idx)
+        self.stream.restart(idx)
 
 
 class Bias(Stage):
@@ -116,7 +118,7 @@ class GaussianNoise(_RandomStage):
         return rng.standard_normal((BLOCK, self.std.size)) * self.std
 
     def __call__(self, z: FloatArray) -> FloatArray:
-        z += self._stream.next()
+        z += self.stream.next()
         return z
 
 
@@ -244,7 +246,8 @@ class Delay(Stage):
 
     def bind(self, batch_size: int) -> None:
         self.buf = np.zeros((batch_size, self.length, self.samples.size))
-        self.head = 0
+        #: the slot written last, shared by the boats (an array: the compiled chain moves it)
+        self.head = np.zeros(1, dtype=np.int64)
         self.fresh = np.ones(batch_size, dtype=bool)
         self._rows = np.arange(batch_size)[:, None]
 
@@ -252,12 +255,12 @@ class Delay(Stage):
         self.fresh[idx] = True
 
     def __call__(self, z: FloatArray) -> FloatArray:
-        self.head = (self.head + 1) % self.length
+        head = self.head[0] = (self.head[0] + 1) % self.length
         if self.fresh.any():
             self.buf[self.fresh] = z[self.fresh, None, :]
             self.fresh[:] = False
-        self.buf[:, self.head] = z
-        slots = (self.head - self.samples) % self.length
+        self.buf[:, head] = z
+        slots = (head - self.samples) % self.length
         return self.buf[self._rows, slots[None, :], self._channels[None, :]]
 
 
@@ -318,7 +321,7 @@ class Dropout(_RandomStage):
 
     def __call__(self, z: FloatArray) -> FloatArray:
         # The first sample of an episode always arrives: there is nothing to hold yet.
-        self.valid = (self._stream.next() >= self.prob) | self.fresh[:, None]
+        self.valid = (self.stream.next() >= self.prob) | self.fresh[:, None]
         self.fresh[:] = False
         self.last = np.where(self.valid, z, self.last)
         return self.last
@@ -429,3 +432,211 @@ class SensorSuite:
         if len(self._masking) == 1:
             return self._masking[0].valid
         return self._masking[0].valid & self._masking[1].valid
+
+
+# -- the standard chain, compiled ------------------------------------------------------------------
+#: The stage types :func:`measure_chain` runs, in the order of :meth:`SensorSuite.standard`.
+CHAIN_ORDER = (Bias, GaussianNoise, WrapAngle, (Quantizer, ZoomingQuantizer), Saturation,
+               SampleHold, Delay, Dropout)
+#: Zooming laws, as :func:`measure_chain` reads them.
+RELATIVE, ZOOM = 0, 1
+
+
+class CompiledChain:
+    """A :class:`SensorSuite` of the standard stages (:data:`CHAIN_ORDER`) run by the compiled
+    :func:`measure_chain`: the same measurements, the same random streams, the state kept in the
+    stages themselves. :meth:`of` returns None for a chain it cannot run (a stage of another
+    kind, or stages out of order), which then runs stage by stage in numpy.
+    """
+
+    def __init__(self, suite: SensorSuite) -> None:
+        m = len(suite.channels)
+        found = {type(s): s for s in suite.stages}
+        self.suite = suite
+        self.bias = found[Bias].bias.copy() if Bias in found else np.zeros(m)
+        self.noise = found.get(GaussianNoise)
+        self.wrap = np.zeros(m, dtype=np.bool_)
+        if WrapAngle in found:
+            self.wrap[found[WrapAngle].idx] = True
+        self.mu = np.full(m, np.nan)
+        if Quantizer in found:
+            self.mu[found[Quantizer].idx] = found[Quantizer].mu[0]
+        self.zoom = found.get(ZoomingQuantizer)
+        self.group = np.full(m, -1, dtype=np.int64)  # each channel's zoom group (-1: none)
+        if self.zoom is not None:
+            for g, channels in enumerate(self.zoom.groups):
+                self.group[channels] = g
+            z = self.zoom
+            self.zoom_settings = np.array([RELATIVE if z.law == "relative" else ZOOM, z.k,
+                                           z.levels, z.zoom_in, z.margin])
+        else:
+            self.zoom_settings = np.zeros(5)
+        self.limit = found[Saturation].high[0].copy() if Saturation in found else np.full(m, np.inf)
+        self.hold = found.get(SampleHold)
+        self.period = self.hold.period[0].copy() if self.hold else np.ones(m, dtype=np.int64)
+        self.delay = found.get(Delay)
+        self.lag = self.delay.samples.astype(np.int64) if self.delay else np.zeros(m, np.int64)
+        self.dropout = found.get(Dropout)
+        self.prob = self.dropout.prob.copy() if self.dropout else np.zeros(m)
+
+    @classmethod
+    def of(cls, suite: SensorSuite) -> CompiledChain | None:
+        """The compiled twin of ``suite``, or None when its stages are not the standard ones in
+        the standard order."""
+        ranks = []
+        for stage in suite.stages:
+            rank = next((i for i, kind in enumerate(CHAIN_ORDER) if type(stage) in
+                         (kind if isinstance(kind, tuple) else (kind,))), None)
+            if rank is None:
+                return None
+            ranks.append(rank)
+        if ranks != sorted(set(ranks)):
+            return None
+        return cls(suite)
+
+    def bind(self, batch_size: int) -> None:
+        """Per-boat state the stages do not keep (the suite itself is bound by its owner)."""
+        #: Which channels carried a fresh sample at the last measurement (False = held).
+        self.valid = np.ones((batch_size, len(self.suite.channels)), dtype=np.bool_)
+        self._none2 = np.zeros((batch_size, 0))
+        self._none_i = np.zeros(batch_size, dtype=np.int64)
+        self._none_b = np.zeros(batch_size, dtype=np.bool_)
+        self._none3 = np.zeros((batch_size, 1, 0))
+        self._none_head = np.zeros(1, dtype=np.int64)
+
+    def begin(self) -> tuple:
+        """Start a measurement: the arrays :func:`measure_chain` reads and updates, after the
+        configuration (gathered anew: the stages own them). Call :meth:`end` after it ran."""
+        empty2, empty_i, empty_b = self._none2, self._none_i, self._none_b
+        noise = self.noise.stream if self.noise is not None else None
+        dropout = self.dropout.stream if self.dropout is not None else None
+        return (
+            noise.rows if noise else empty2, noise.cursor if noise else empty_i,
+            self.zoom.mu if self.zoom else empty2,
+            self.hold.count[:, 0] if self.hold else empty_i,
+            self.hold.last if self.hold else empty2,
+            self.delay.buf if self.delay else self._none3,
+            self.delay.head if self.delay else self._none_head,
+            self.delay.fresh if self.delay else empty_b,
+            dropout.rows if dropout else empty2, dropout.cursor if dropout else empty_i,
+            self.dropout.last if self.dropout else empty2,
+            self.dropout.fresh if self.dropout else empty_b)
+
+    def configuration(self) -> tuple:
+        """The constant arrays :func:`measure_chain` reads, and the stages present."""
+        return (self.bias, self.wrap, self.mu, self.group, self.zoom_settings, self.limit,
+                self.period, self.lag, self.prob, self.noise is not None, self.zoom is not None,
+                self.hold is not None, self.delay is not None, self.dropout is not None)
+
+    def end(self) -> None:
+        """End a measurement: account for the rows :func:`measure_chain` took from the random
+        streams."""
+        for stage in (self.noise, self.dropout):
+            if stage is not None:
+                stage.stream.advanced()
+
+    def measure(self, z: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Measurements and valid channels (batch x channels) of true values ``z``."""
+        y = np.empty_like(z)
+        valid = np.empty(z.shape, dtype=np.bool_)
+        measure_chain(np.ascontiguousarray(z, dtype=float), *self.configuration(), *self.begin(),
+                      y, valid)
+        self.end()
+        self.valid = valid
+        return y, valid
+
+
+@jit
+def measure_chain(z, bias, wrap, mu, group, zoom_settings, limit, period, lag, prob,
+                  noisy, zooming, holding, delaying, dropping,
+                  noise_rows, noise_cursor, zoom_mu, count, held, buf, head, delay_fresh,
+                  dropout_rows, dropout_cursor, kept, dropout_fresh, y, valid):
+    """The standard chain (:meth:`SensorSuite.standard`, module docstring) on true values ``z``
+    (batch x channels), every boat in turn: measurements to ``y``, fresh samples to ``valid``.
+    Row ``cursor[b]`` of a random stream is boat b's current draw; the cursors advance by one."""
+    n_boats, m = z.shape
+    if delaying:  # the slot to write, shared by the boats
+        head[0] = (head[0] + 1) % buf.shape[1]
+    for b in range(n_boats):
+        row = y[b]
+        for c in range(m):
+            a = z[b, c] + bias[c]
+            if noisy:
+                a += noise_rows[noise_cursor[b], c]
+            if wrap[c]:  # pi - ((pi - a) mod 2 pi) lies in (-pi, pi]
+                a = math.pi - (math.pi - a) % (2 * math.pi)
+            if not np.isnan(mu[c]):
+                a = mu[c] * np.rint(a / mu[c])
+            row[c] = a
+        if zooming:
+            _zoom(row, group, zoom_settings, zoom_mu[b])
+        for c in range(m):
+            a = row[c]
+            if a < -limit[c]:
+                a = -limit[c]
+            elif a > limit[c]:
+                a = limit[c]
+            fresh = True
+            if holding:
+                fresh = count[b] % period[c] == 0
+                if fresh:
+                    held[b, c] = a
+                a = held[b, c]
+            row[c] = a
+            valid[b, c] = fresh
+        if holding:
+            count[b] += 1
+        if noisy:
+            noise_cursor[b] += 1
+        if delaying:
+            length = buf.shape[1]
+            if delay_fresh[b]:
+                for slot in range(length):
+                    buf[b, slot] = row
+                delay_fresh[b] = False
+            buf[b, head[0]] = row
+            for c in range(m):
+                row[c] = buf[b, (head[0] - lag[c]) % length, c]
+        if dropping:
+            for c in range(m):
+                arrived = dropout_rows[dropout_cursor[b], c] >= prob[c] or dropout_fresh[b]
+                if arrived:
+                    kept[b, c] = row[c]
+                row[c] = kept[b, c]
+                valid[b, c] = valid[b, c] and arrived
+            dropout_fresh[b] = False
+            dropout_cursor[b] += 1
+
+
+@jit
+def _zoom(row, group, settings, mu):
+    """The zooming quantizer (:class:`ZoomingQuantizer`) on one boat's channels ``row``, in
+    place; ``mu`` is the boat's zoom variable per group (updated)."""
+    law, k, levels, zoom_in, margin = settings[0], settings[1], settings[2], settings[3], \
+        settings[4]
+    for g in range(mu.size):
+        size, norm, peak, index_peak = 0, 0.0, 0.0, 0.0
+        for c in range(row.size):
+            if group[c] == g:
+                size += 1
+                norm += row[c] * row[c]
+                peak = max(peak, abs(row[c]))
+                if law == ZOOM:
+                    index_peak = max(index_peak, abs(np.rint(row[c] / mu[g])))
+        norm = math.sqrt(norm)
+        if law == RELATIVE:
+            step = 2 * k * norm / math.sqrt(size)
+            mu[g] = step
+            usable = step > 1e-12 * (1 + norm)
+            for c in range(row.size):
+                if group[c] == g:
+                    row[c] = step * np.rint(row[c] / step) if usable else 0.0
+        else:
+            step = mu[g]
+            for c in range(row.size):
+                if group[c] == g:
+                    row[c] = step * min(max(np.rint(row[c] / step), -levels), levels)
+            if index_peak > levels:
+                mu[g] = step / zoom_in
+            elif peak <= margin * levels * step:
+                mu[g] = step * zoom_in

@@ -9,7 +9,6 @@ is minus the task's quadratic cost.
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
@@ -109,11 +108,8 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
         return obs, self._info()
 
     def step(self, action):
-        sim = self.sim
-        sim.apply(action)
-        reward, failed = sim.advance()
-        obs = sim.measure()[0].astype(np.float32)
-        return obs, float(reward[0]), bool(failed[0]), False, self._info()
+        y, reward, failed = self.sim.step(action)
+        return y[0].astype(np.float32), float(reward[0]), bool(failed[0]), False, self._info()
 
     def _info(self) -> dict[str, Any]:
         # views, not copies: the simulator replaces these arrays every step, never writes them
@@ -122,7 +118,7 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
                 "action_clipped": bool(sim.clipped[0]),
                 # without a sea the simulator never replaces d: a copy, not a shared view
                 "disturbance": sim.d[0] if sim.disturbances is not None else sim.d[0].copy(),
-                "measurement_mask": sim.sensors.valid[0].copy(),
+                "measurement_mask": sim.valid[0].copy(),
                 "time": float(sim.steps[0]) * sim.dt}
 
     def render(self):
@@ -187,17 +183,17 @@ class MarineVectorEnv(VectorEnv):
 
     def step(self, actions):
         sim = self.sim
-        sim.apply(actions)
-        reward, terminated = sim.advance()
+        restarting = self._done.any()  # boats to reset before they are measured
+        y, reward, terminated = sim.step(actions, measure=not restarting)
         truncated = (sim.steps >= self.max_episode_steps) if self.max_episode_steps \
             else np.zeros(self.num_envs, dtype=bool)
-        if self._done.any():
+        if restarting:
             idx = np.flatnonzero(self._done)
             sim.reset(idx, [self._rngs[i] for i in idx])
             reward[idx], terminated[idx], truncated[idx] = 0.0, False, False
+            y = sim.measure()
         self._done = terminated | truncated
-        obs = sim.measure().astype(np.float32)
-        return obs, reward, terminated, truncated, self._info()
+        return y.astype(np.float32), reward, terminated, truncated, self._info()
 
     def restart(self, idx: NDArray[np.intp]) -> tuple[np.ndarray, np.ndarray]:
         """Start new episodes of boats ``idx`` now rather than on the next step (the
@@ -209,11 +205,7 @@ class MarineVectorEnv(VectorEnv):
         idx = np.asarray(idx, dtype=np.intp)
         self.sim.reset(idx, [self._rngs[i] for i in idx])
         self._done[idx] = False
-        sensors, self.sim.sensors = self.sim.sensors, copy.deepcopy(self.sim.sensors)
-        try:
-            y, valid = self.sim.measure(), self.sim.sensors.valid
-        finally:
-            self.sim.sensors = sensors
+        y, valid = self.sim.measure_detached()
         return y[idx].astype(np.float32), np.broadcast_to(valid, y.shape)[idx]
 
     def _info(self) -> dict[str, Any]:
@@ -221,7 +213,7 @@ class MarineVectorEnv(VectorEnv):
         return {"state": sim.x, "_state": m, "action_applied": sim.u, "_action_applied": m,
                 "action_clipped": sim.clipped, "_action_clipped": m,
                 "disturbance": sim.d if sim.disturbances is not None else sim.d.copy(),
-                "_disturbance": m, "measurement_mask": sim.sensors.valid,
+                "_disturbance": m, "measurement_mask": sim.valid,
                 "_measurement_mask": m, "time": sim.steps * sim.dt, "_time": m}
 
     def render(self):

@@ -7,6 +7,7 @@ code and a vector environment equals N single ones given the same seeds.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
@@ -19,7 +20,17 @@ from ..models import VehicleModel
 from ..models.effects import BatchActuators, Effect, ModelWithEffects
 from ..models.integrate import ExactStep, RK4Step
 from ..sea.processes import DisturbanceSource
-from ..sensors import SensorSuite, as_index, per_channel
+from ..sensors import CompiledChain, SensorSuite, as_index, per_channel
+from .kernel import (
+    BAD_ACTION,
+    REFILL,
+    KernelState,
+    all_finite,
+    chain_fields,
+    kernel_for,
+    measure_boats,
+    output_map,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -147,6 +158,12 @@ class Actuation:
 class Simulator:
     """Steps a batch of boats: disturbances -> dynamics -> cost -> sensors.
 
+    :meth:`step` runs a control period of every boat in one compiled call (the kernel of
+    :mod:`marine_envs.envs.kernel`) when the model has compiled equations (or is stepped exactly)
+    and the sensors are the standard chain; else, and always through :meth:`apply`,
+    :meth:`advance` and :meth:`measure`, it runs in numpy (effects, a zig-zag rudder law, user
+    models). Both give the same numbers.
+
     :param model: the vehicle model.
     :param sensors: the sensor chain over some of the model's states (by name).
     :param task: cost and termination.
@@ -197,7 +214,7 @@ class Simulator:
         matrix = self.actuation.matrix
         self._allocation = None if matrix is None else np.asarray(matrix, float).T.copy()
         limited = np.flatnonzero(np.isfinite(task.low) | np.isfinite(task.high))
-        self._limited = as_index(limited)
+        self._limited, self._limited_list = as_index(limited), limited
         self._low, self._high = task.low[limited][None, :], task.high[limited][None, :]
         n_d = len(model.disturbance_names)
         # the reward is a weighted sum of squares of the stacked [x u d] vector
@@ -241,6 +258,149 @@ class Simulator:
             self.disturbances.bind(batch_size)
         if self.actuators is not None:
             self.actuators.bind(batch_size)
+        self._kernel, self._chain = self._compiled_kernel(), None
+        if self._kernel is not None:
+            self._chain = CompiledChain(self.sensors)
+            self._chain.bind(batch_size)
+            self._state = self._kernel_state()
+
+    # -- the compiled path -------------------------------------------------------------------------
+    def _compiled_kernel(self):
+        """The step kernel of this simulator, or None when it runs in numpy."""
+        numpy_steps = (type(self).apply, type(self).advance, type(self).measure) != \
+            (Simulator.apply, Simulator.advance, Simulator.measure)
+        if numpy_steps or self.effects or CompiledChain.of(self.sensors) is None:
+            return None
+        exact = isinstance(self.integrate, ExactStep)
+        if not exact and np.ndim(self.model.constants) != 1:
+            return None  # parameters per boat
+        measured = [self.model.output_names.index(c) for c in self.sensors.channels]
+        self._output_map = output_map(self.model, measured)
+        return None if self._output_map is None else kernel_for(self.model, exact)
+
+    def _kernel_state(self) -> KernelState:
+        """What the kernel keeps: constants, step counts, the sensor chain's arrays."""
+        if isinstance(self.integrate, ExactStep):
+            offset = self.integrate.offset
+            n_x = len(self.model.state_names)
+            p = np.concatenate([self.integrate.transition.ravel(),
+                                np.zeros(n_x) if offset is None else offset])
+            h, substeps = self.dt, 1
+        else:
+            p, h, substeps = self.model.constants, self.integrate.h, self.integrate.substeps
+        allocated = self._allocation is not None
+        n_in = self._weights.size
+        stream = self._disturbance_stream
+        return KernelState(
+            np.ascontiguousarray(p, dtype=float), float(h), int(substeps),
+            self.u_mid[0].copy(), self.u_scale[0].copy(),
+            self._allocation if allocated else np.zeros((1, 1)), allocated,
+            self._weights.copy(), np.zeros(n_in) if self._reference is None else self._reference,
+            self._limited_list.astype(np.int64), self._low[0].copy(), self._high[0].copy(),
+            self._output_map, self.steps, stream is not None,
+            stream.rows if stream is not None else np.zeros((1, 1)),
+            stream.cursor if stream is not None else np.zeros(1, dtype=np.int64),
+            *chain_fields(self._chain))
+
+    @property
+    def compiled(self) -> bool:
+        """True when :meth:`step` runs the compiled kernel (else numpy)."""
+        return self._kernel is not None
+
+    def run_in_numpy(self) -> None:
+        """Step every boat through :meth:`apply`, :meth:`advance` and :meth:`measure` in numpy
+        from now on (the reference the kernel is tested against; slower)."""
+        if self._kernel is not None:
+            for stream in self._streams():
+                stream.recount()
+        self._kernel = self._chain = None
+
+    @property
+    def _disturbance_stream(self):
+        """The block stream the disturbances come from when they are one (the kernel reads it),
+        else None (they are stepped in Python)."""
+        return getattr(self.disturbances, "stream", None)
+
+    def _streams(self) -> list:
+        """The block streams the kernel reads: sensor noise, dropout, disturbances."""
+        streams = [getattr(self._chain.noise, "stream", None),
+                   getattr(self._chain.dropout, "stream", None), self._disturbance_stream]
+        return [s for s in streams if s is not None]
+
+    def _refill_streams(self) -> None:
+        """Refill the random streams whose blocks the kernel used up."""
+        for stream in self._streams():
+            stream.refill_exhausted()
+
+    def step(self, action: ArrayLike, measure: bool = True
+             ) -> tuple[FloatArray | None, FloatArray, NDArray[np.bool_]]:
+        """One control period of every boat: :meth:`apply` the actions, :meth:`advance` and,
+        if ``measure``, :meth:`measure`; in one compiled call where the kernel runs.
+
+        :return: ``(measurements or None, reward, failed)``.
+        :raises ValueError: NaN or inf in the action, or a wrong shape (nothing changed).
+        :raises FloatingPointError: a boat's state became NaN or inf.
+        """
+        if self._kernel is None:
+            self.apply(action)
+            reward, failed = self.advance()
+            return (self.measure() if measure else None), reward, failed
+        a = self._actions(action)
+        d = self.d
+        if self.disturbances is not None:
+            if self._disturbance_stream is not None:
+                d = np.empty_like(self.d)  # the kernel reads the stream
+            elif all_finite(a):  # (else the kernel refuses the action: keep the stream)
+                d = self.disturbances.step()
+        n = self.batch_size
+        x, u = np.empty_like(self.x), np.empty_like(self.u)
+        reward, failed, clipped = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        y = np.empty((n, len(self.sensors.channels)) if measure else (0, 0))
+        valid = np.empty(y.shape, dtype=bool)
+        status = self._kernel(self._state, a, self.x, d, x, u, reward, failed, clipped, measure,
+                              y, valid)
+        if status == BAD_ACTION:
+            raise ValueError(f"action contains NaN or inf: {a.tolist()!r}")
+        self.d = d
+        if status >= 0:
+            raise FloatingPointError(f"simulation diverged: non-finite state {x[status]} of "
+                                     f"boat {status} (a parameter or time step out of range?)")
+        self.x, self.u, self.clipped = x, u, clipped
+        if status == REFILL:
+            self._refill_streams()
+        if measure:
+            self._chain.valid = valid
+        return (y if measure else None), reward, failed
+
+    def measure_detached(self) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Measurements and valid channels of every boat from a copy of the sensors, whose own
+        state does not advance (for restarting some boats between steps)."""
+        saved = self.sensors, self._chain, getattr(self, "_state", None)
+        self.sensors = copy.deepcopy(self.sensors)
+        if self._chain is not None:
+            self._chain = CompiledChain(self.sensors)
+            self._chain.bind(self.batch_size)
+            self._state = self._kernel_state()
+        try:
+            return self.measure(), self.valid
+        finally:
+            self.sensors, self._chain, self._state = saved
+
+    @property
+    def valid(self) -> NDArray[np.bool_]:
+        """Which channels carried a fresh sample at the last measurement (False = held)."""
+        return self._chain.valid if self._chain is not None else self.sensors.valid
+
+    def __getstate__(self) -> dict:
+        # the kernel's state holds compiled objects: rebuilt on unpickling (and deep copies)
+        state = self.__dict__.copy()
+        state.pop("_state", None)
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        if self.__dict__.get("_kernel") is not None:
+            self._state = self._kernel_state()
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator],
               x0: ArrayLike | None = None) -> None:
@@ -267,14 +427,7 @@ class Simulator:
         Larger actions are clipped and noted in :attr:`clipped`.
         :raises ValueError: NaN or inf in the action, or a wrong shape.
         """
-        a = np.asarray(action)
-        shape = (self.batch_size, self.n_actions)
-        if a.size != shape[0] * shape[1] or a.dtype.kind not in "fiub":
-            raise ValueError(f"action has shape {a.shape} and dtype {a.dtype}; expected "
-                             f"{self.n_actions} number(s) per environment for "
-                             f"{self.batch_size} environment(s)")
-        # one conversion up front: mixed float32/float64 arithmetic is slower
-        a = a.reshape(shape).astype(np.float64, copy=False)
+        a = self._actions(action)
         # numpy reductions have microseconds of overhead: small actions are checked in Python
         # (a sum, not a max: max() skips a NaN that is not first)
         if a.size <= 64:
@@ -294,6 +447,17 @@ class Simulator:
         self.u = f if self._allocation is None else f @ self._allocation
         if self.actuators is not None:
             self.u = self.actuators.step(self.u)
+
+    def _actions(self, action: ArrayLike) -> FloatArray:
+        """``action`` as a float array (batch x actuators). :raises ValueError: a wrong shape."""
+        a = np.asarray(action)
+        shape = (self.batch_size, self.n_actions)
+        if a.size != shape[0] * shape[1] or a.dtype.kind not in "fiub":
+            raise ValueError(f"action has shape {a.shape} and dtype {a.dtype}; expected "
+                             f"{self.n_actions} number(s) per environment for "
+                             f"{self.batch_size} environment(s)")
+        # one conversion up front: mixed float32/float64 arithmetic is slower
+        return np.ascontiguousarray(a.reshape(shape), dtype=np.float64)
 
     def nominal_action(self) -> FloatArray:
         """The normalised action that applies the model's nominal input ``u0`` (for thrusters:
@@ -321,6 +485,13 @@ class Simulator:
 
     def measure(self) -> FloatArray:
         """Sensor outputs (batch x channels) of the current states."""
+        if self._chain is not None:
+            y = np.empty((self.batch_size, len(self.sensors.channels)))
+            valid = np.empty(y.shape, dtype=bool)
+            if measure_boats(self._state, np.ascontiguousarray(self.x, dtype=float), y, valid):
+                self._refill_streams()
+            self._chain.valid = valid
+            return y
         outputs = self.x if self._outputs_are_states else self.model.output(self.x)
         true = outputs[:, self.measured]
         if self.effects:

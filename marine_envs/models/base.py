@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from ..compiled import Equations
 
 FloatArray = NDArray[np.float64]
 
@@ -29,9 +32,17 @@ def require(condition: bool, name: str, value: Any, expectation: str) -> None:
 class VehicleModel(ABC):
     """Base class of all vehicle models.
 
-    Subclasses set the class attributes below and implement :meth:`rhs`. ``linearize`` defaults to
-    central finite differences of ``rhs``; linear models override it with the exact matrices.
+    Subclasses set the class attributes below and give their equations once, compiled, as
+    :attr:`equations` with the constants they read (:meth:`pack`); :meth:`rhs` runs them on every
+    row of a batch, and the environments' step kernel integrates them (a model may instead
+    implement :meth:`rhs` itself in numpy: it is then stepped by the numpy path). ``linearize``
+    defaults to central finite differences of ``rhs``; linear models override it with the exact
+    matrices.
     """
+
+    #: One boat's equations ``core(x, u, d, p, out)``, compiled (:mod:`marine_envs.compiled`),
+    #: with ``p`` = :attr:`constants`; None for a model whose :meth:`rhs` is its own.
+    equations: ClassVar[Equations | None] = None
 
     name: ClassVar[str]
     state_names: ClassVar[tuple[str, ...]]
@@ -109,9 +120,8 @@ class VehicleModel(ABC):
         """Physical input limits ``(low, high)`` in the units of :attr:`input_units`."""
 
     # -- dynamics ------------------------------------------------------------------------------
-    @abstractmethod
     def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
-        """Continuous-time state derivative.
+        """Continuous-time state derivative: :attr:`equations` on every row.
 
         :param x: state, shape ``(..., n_x)``, units :attr:`state_units`.
         :param u: input, shape ``(..., n_u)``, units :attr:`input_units`.
@@ -119,6 +129,21 @@ class VehicleModel(ABC):
             means zero.
         :return: ``x_dot``, shape ``(..., n_x)``.
         """
+        if self.equations is None:
+            raise NotImplementedError(f"{type(self).__name__} gives neither equations nor rhs")
+        x, u, d = self._split(x, u, d)
+        return self.equations(x, u, d, self.constants)
+
+    @functools.cached_property
+    def constants(self) -> FloatArray:
+        """The constants :attr:`equations` read, packed (:meth:`pack`): shape ``(p,)``, or
+        ``(..., p)`` when parameters hold one value per batch row (:meth:`with_rows`)."""
+        return np.asarray(self.pack(), dtype=float)
+
+    def pack(self) -> FloatArray:
+        """The constants of :attr:`equations` from :attr:`params`, in the order the equations
+        read them (numpy arithmetic, so that parameters given per row pack per row)."""
+        raise NotImplementedError(f"{type(self).__name__} has no compiled equations")
 
     def linearize(
         self, x0: ArrayLike | None = None, u0: ArrayLike | None = None, eps: float = 1e-6
@@ -237,6 +262,7 @@ class VehicleModel(ABC):
         model = copy.copy(self)
         model.params = params
         model.__dict__.pop("_step_models", None)
+        model.__dict__.pop("constants", None)
         return model
 
     def _split(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None):

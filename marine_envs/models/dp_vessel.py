@@ -44,6 +44,7 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..compiled import Equations, jit
 from .base import FloatArray, VehicleModel, require
 from .kinematics import planar_to_body, planar_to_ned
 
@@ -193,6 +194,30 @@ class DPVesselParams:
         return wf_matrices(self.w0, self.lambda_, self.K_w)[2]
 
 
+#: Layout of the packed constants ``p`` of :func:`dp_vessel_rhs` (see :meth:`DPVesselModel.pack`):
+#: M^-1 and M^-1 D row by row, then per degree of freedom 1/T_b, E_b, w0^2, 2 lambda w0, K_w.
+MINV, MINV_D, INV_TB, E_B, W0_SQ, TWO_LAMBDA_W0, K_W = 0, 9, 18, 21, 24, 27, 30
+
+
+@jit
+def dp_vessel_rhs(x, u, d, p, out):
+    """One vessel's ``x_dot`` (module docstring); ``p`` packed by :meth:`DPVesselModel.pack`."""
+    c, s = np.cos(x[2]), np.sin(x[2])
+    out[0], out[1] = planar_to_ned(c, s, x[3], x[4])  # R(psi) nu
+    out[2] = x[5]
+    # M nu_dot = tau + R(psi)^T b - D nu
+    bias_x, bias_y = planar_to_body(c, s, x[6], x[7])
+    f0, f1, f2 = u[0] + bias_x, u[1] + bias_y, u[2] + x[8]
+    for i in range(3):
+        m, md = MINV + 3 * i, MINV_D + 3 * i
+        out[3 + i] = (p[m] * f0 + p[m + 1] * f1 + p[m + 2] * f2) \
+            - (p[md] * x[3] + p[md + 1] * x[4] + p[md + 2] * x[5])
+        out[6 + i] = -p[INV_TB + i] * x[6 + i] + p[E_B + i] * d[i]
+        out[9 + i] = x[12 + i]  # xi_1_dot = xi_2
+        out[12 + i] = -p[W0_SQ + i] * x[9 + i] - p[TWO_LAMBDA_W0 + i] * x[12 + i] \
+            + p[K_W + i] * d[3 + i]
+
+
 class DPVesselModel(VehicleModel):
     """Dynamically positioned supply vessel (the DP wave-frequency patent): LF + bias + WF model,
     15 states."""
@@ -214,19 +239,22 @@ class DPVesselModel(VehicleModel):
     measured_names: ClassVar[tuple[str, ...]] = ("north", "east", "psi")
     is_linear: ClassVar[bool] = False  # R(psi)
     noise_model_states: ClassVar[tuple[str, ...]] = state_names[6:]
+    equations: ClassVar[Equations] = Equations(dp_vessel_rhs)
 
     def __init__(self, params: DPVesselParams | None = None) -> None:
         super().__init__(DPVesselParams() if params is None else params)
         k = self.params
-        # precomputed once: rhs runs 4x per control step on a whole batch of boats
-        M = k.M
-        self._Minv = np.linalg.inv(M)
+        self._Minv = np.linalg.inv(k.M)
         self._MinvD = self._Minv @ k.D
         self._inv_Tb = 1.0 / np.array(k.T_b)  # 0 for T_b = inf
         self._E_b = k.E_b
-        self._w0_sq = np.array(k.w0) ** 2
-        self._two_lam_w0 = 2 * np.array(k.lambda_) * np.array(k.w0)
-        self._K_w = k.K_w
+
+    def pack(self) -> FloatArray:
+        """The constants of :func:`dp_vessel_rhs`, derived once: it runs 8x per control step."""
+        k = self.params
+        w0 = np.array(k.w0)
+        return np.concatenate([self._Minv.ravel(), self._MinvD.ravel(), self._inv_Tb, self._E_b,
+                               w0**2, 2 * np.array(k.lambda_) * w0, k.K_w])
 
     @property
     def u_bounds(self) -> tuple[FloatArray, FloatArray]:
@@ -243,27 +271,6 @@ class DPVesselModel(VehicleModel):
         return -high, high
 
     # -- dynamics ------------------------------------------------------------------------------
-    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
-        x, u, d = self._split(x, u, d)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], d.shape[:-1]) + (15,)
-        psi = x[..., 2]
-        c, s = np.cos(psi), np.sin(psi)
-        nu = x[..., 3:6]
-        b_n, b_e = x[..., 6], x[..., 7]
-        out = np.empty(shape)
-        out[..., 0], out[..., 1] = planar_to_ned(c, s, nu[..., 0], nu[..., 1])  # R(psi) nu
-        out[..., 2] = nu[..., 2]
-        # M nu_dot = tau + R(psi)^T b - D nu
-        bias_x, bias_y = planar_to_body(c, s, b_n, b_e)
-        force = np.stack(np.broadcast_arrays(u[..., 0] + bias_x, u[..., 1] + bias_y,
-                                             u[..., 2] + x[..., 8]), axis=-1)
-        out[..., 3:6] = force @ self._Minv.T - nu @ self._MinvD.T
-        out[..., 6:9] = -self._inv_Tb * x[..., 6:9] + self._E_b * d[..., :3]
-        out[..., 9:12] = x[..., 12:15]  # xi_1_dot = xi_2
-        out[..., 12:15] = (-self._w0_sq * x[..., 9:12] - self._two_lam_w0 * x[..., 12:15]
-                           + self._K_w * d[..., 3:6])
-        return out
-
     def linearize(self, x0: ArrayLike | None = None, u0: ArrayLike | None = None,
                   eps: float = 0.0) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Exact Jacobians ``(A, B, E)`` of :meth:`rhs` at ``(x0, u0, d = 0)``.

@@ -46,8 +46,8 @@ import numbers
 from typing import ClassVar
 
 import numpy as np
-from numpy.typing import ArrayLike
 
+from ..compiled import Equations, jit
 from .base import FloatArray, VehicleModel, require
 from .kinematics import planar_to_body, planar_to_ned
 
@@ -169,6 +169,64 @@ class HovercraftParams:
         return dataclasses.replace(self, **changes) if changes else self
 
 
+#: Layout of the packed constants ``p`` of :func:`hovercraft_rhs`: three sets of the 13
+#: polynomial coefficients (see :meth:`HovercraftModel.pack`), then the other constants.
+HYDRO, AERO, BOTH = 0, 13, 26
+(INV_M11, INV_M, DISC, RUDDER, T0, THRUST_SLOPE, C_R1, C_R2, C_R3, C_R4, MASS, X_R, Y_P,
+ N_HBETA) = 39, 40, 44, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54, 55
+
+
+@jit
+def _polynomials(p, c, u, v, r):
+    """The polynomial X, Y, N forces (N, N, N m) of the coefficient set at ``p[c:c + 13]``."""
+    x_u, x_uu, x_vv, x_uv, y_v, y_vv, y_uv = p[c], p[c + 1], p[c + 2], p[c + 3], p[c + 4], \
+        p[c + 5], p[c + 6]
+    n_v, n_r, n_vvv, n_rrr, n_vvr, n_vrr = p[c + 7], p[c + 8], p[c + 9], p[c + 10], p[c + 11], \
+        p[c + 12]
+    uv = u * v
+    vv = v * v
+    x = (x_u + x_uu * abs(u)) * u + x_vv * vv + x_uv * uv
+    y = (y_v + y_vv * abs(v)) * v + y_uv * uv
+    n = n_v * v + n_r * r + (n_vvv * vv + (n_vvr * v + n_vrr * r) * r) * v + n_rrr * (r * r) * r
+    return x, y, n
+
+
+@jit
+def hovercraft_rhs(x, u, d, p, out):
+    """One craft's ``x_dot`` (module docstring); ``p`` packed by :meth:`HovercraftModel.pack`.
+    Inputs are not clipped here: the environment applies the bounds."""
+    vel_u, vel_v, r, psi = x[0], x[1], x[2], x[5]
+    sigma_1, sigma_2, delta = u[0], u[1], u[2]
+    c, s = np.cos(psi), np.sin(psi)
+    if d[0] == 0.0 and d[1] == 0.0:  # u_a = u, v_a = v: one polynomial, summed coefficients
+        ua = vel_u
+        x_force, y_force, n_moment = _polynomials(p, BOTH, vel_u, vel_v, r)
+    else:
+        wind_u, wind_v = planar_to_body(c, s, d[0], d[1])
+        ua, va = vel_u - wind_u, vel_v - wind_v
+        x_force, y_force, n_moment = _polynomials(p, HYDRO, vel_u, vel_v, r)
+        x_air, y_air, n_air = _polynomials(p, AERO, ua, va, r)
+        x_force, y_force, n_moment = x_force + x_air, y_force + y_air, n_moment + n_air
+    if p[N_HBETA] != 0.0:  # atan2 is costly and the default coefficient is 0
+        n_moment = n_moment + p[N_HBETA] * np.arctan2(-vel_v, vel_u)
+    thrust_factor = p[T0] - p[THRUST_SLOPE] * ua
+    t1, t2 = sigma_1 * thrust_factor, sigma_2 * thrust_factor
+    # rudder dynamic pressure times n_R S_R: free stream plus k_s of the slipstream increment
+    q = p[RUDDER] * (ua * ua + p[DISC] * max(0.0, 0.5 * (t1 + t2)))
+    y_r = (-p[C_R4] * q) * delta
+    abs_delta = abs(delta)
+    x_force = (x_force + (t1 + t2) + p[MASS] * vel_v * r
+               - (p[C_R1] + (p[C_R2] + p[C_R3] * abs_delta) * abs_delta) * q)
+    y_force = y_force + y_r - p[MASS] * vel_u * r
+    n_moment = n_moment + p[X_R] * y_r + p[Y_P] * (t1 - t2)
+    i = INV_M
+    out[0] = x_force * p[INV_M11]
+    out[1] = p[i] * y_force + p[i + 1] * n_moment
+    out[2] = p[i + 2] * y_force + p[i + 3] * n_moment
+    out[3], out[4] = planar_to_ned(c, s, vel_u, vel_v)
+    out[5] = r
+
+
 class HovercraftModel(VehicleModel):
     """LCAC-like air-cushion vehicle, 3-DOF MMG-separated model (the hovercraft EKF paper,
     docs/models.md 5).
@@ -188,26 +246,30 @@ class HovercraftModel(VehicleModel):
     affine_parameters: ClassVar[frozenset[str]] = frozenset(
         f.name for f in dataclasses.fields(HovercraftParams)
         if f.name[:3] in ("X_A", "Y_A", "N_A", "X_H", "Y_H", "N_H") or f.name.startswith("C_R"))
+    equations: ClassVar[Equations] = Equations(hovercraft_rhs)
 
     def __init__(self, params: HovercraftParams | None = None) -> None:
         super().__init__(HovercraftParams() if params is None else params)
-        k = self.params.resolved()
-        self._k = k
-        self._inv_m11 = 1.0 / (k.m - k.X_ud)
-        # inverse of the sway-yaw mass matrix [[m - Y_vd, -Y_rd], [-N_vd, Iz - N_rd]], Y_rd = N_vd
-        m22, m23, m32, m33 = k.m - k.Y_vd, -k.N_vd, -k.N_vd, k.Iz - k.N_rd
-        det = m22 * m33 - m23 * m32
-        self._inv_m = (m33 / det, -m23 / det, -m32 / det, m22 / det)
-        self._disc = k.k_s * 2.0 / (k.rho_a * math.pi * k.D_p**2 / 4.0)  # V_R^2 per N of Tbar
-        self._rudder = k.n_R * k.S_R * 0.5 * k.rho_a  # force per (coefficient * V_R^2)
         self._sigma0: float | None = None  # trim pitch at u_cruise, computed on first use
+
+    def pack(self) -> FloatArray:
+        """The constants of :func:`hovercraft_rhs`, derived once: it runs 8x per control step."""
+        k = self.params.resolved()
         hydro = (k.X_Hu, k.X_Huu, k.X_Hvv, k.X_Huv, k.Y_Hv, k.Y_Hvv, k.Y_Huv, k.N_Hv,
                  k.N_Hr + k.N_Ar, k.N_Hvvv, k.N_Hrrr + k.N_Arrr, k.N_Hvvr, k.N_Hvrr)
         # aerodynamic terms in (u_a, v_a, r); the r-only terms sit in `hydro` (r is the same)
         aero = (k.X_Au, k.X_Auu, k.X_Avv, k.X_Auv, k.Y_Av, k.Y_Avv, k.Y_Auv, k.N_Av, 0.0,
                 k.N_Avvv, 0.0, k.N_Avvr, k.N_Avrr)
-        self._hydro, self._aero = hydro, aero
-        self._both = tuple(h + a for h, a in zip(hydro, aero, strict=True))  # no wind: u_a = u
+        both = tuple(h + a for h, a in zip(hydro, aero, strict=True))  # no wind: u_a = u
+        # inverse of the sway-yaw mass matrix [[m - Y_vd, -Y_rd], [-N_vd, Iz - N_rd]], Y_rd = N_vd
+        m22, m23, m32, m33 = k.m - k.Y_vd, -k.N_vd, -k.N_vd, k.Iz - k.N_rd
+        det = m22 * m33 - m23 * m32
+        inverse = (m33 / det, -m23 / det, -m32 / det, m22 / det)
+        disc = k.k_s * 2.0 / (k.rho_a * math.pi * k.D_p**2 / 4.0)  # V_R^2 per N of Tbar
+        rudder = k.n_R * k.S_R * 0.5 * k.rho_a  # force per (coefficient * V_R^2)
+        return np.array([*hydro, *aero, *both, 1.0 / (k.m - k.X_ud), *inverse, disc, rudder,
+                         k.T0, k.T0 / k.U_T, k.C_R1, k.C_R2, k.C_R3, k.C_R4, k.m, k.x_R, k.y_P,
+                         k.N_Hbeta])
 
     # -- nominal operating point -------------------------------------------------------------
     @property
@@ -258,68 +320,3 @@ class HovercraftModel(VehicleModel):
         k = self.params
         return (np.array([k.sigma_min, k.sigma_min, -k.delta_max]),
                 np.array([k.sigma_max, k.sigma_max, k.delta_max]))
-
-    # -- dynamics ------------------------------------------------------------------------------
-    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
-        """``x_dot`` (m/s^2, m/s^2, rad/s^2, m/s, m/s, rad/s) of docs/models.md 5.2; see the module
-        docstring. Inputs are not clipped here: the environment applies :attr:`u_bounds`."""
-        wind = d is not None
-        x, u, d = self._split(x, u, d)
-        k = self._k
-        # row-major (n_x, ...) copies: elementwise work on contiguous rows is twice as fast
-        vel_u, vel_v, r, _, _, psi = np.ascontiguousarray(np.moveaxis(x, -1, 0))
-        sigma_1, sigma_2, delta = np.ascontiguousarray(np.moveaxis(u, -1, 0))
-        c, s = np.cos(psi), np.sin(psi)
-        if wind:
-            wind_n, wind_e = np.moveaxis(d, -1, 0)
-            wind_u, wind_v = planar_to_body(c, s, wind_n, wind_e)
-            ua, va = vel_u - wind_u, vel_v - wind_v
-            x_force, y_force, n_moment = self._polynomials(self._hydro, vel_u, vel_v, r)
-            x_air, y_air, n_air = self._polynomials(self._aero, ua, va, r)
-            x_force, y_force, n_moment = x_force + x_air, y_force + y_air, n_moment + n_air
-        else:  # u_a = u, v_a = v: one polynomial with the summed coefficients
-            ua = vel_u
-            x_force, y_force, n_moment = self._polynomials(self._both, vel_u, vel_v, r)
-        if k.N_Hbeta:  # atan2 is costly and the default coefficient is 0
-            n_moment = n_moment + k.N_Hbeta * np.arctan2(-vel_v, vel_u)
-
-        thrust_factor = k.T0 - (k.T0 / k.U_T) * ua
-        t1, t2 = sigma_1 * thrust_factor, sigma_2 * thrust_factor
-        # rudder dynamic pressure times n_R S_R: free stream plus k_s of the slipstream increment
-        q = self._rudder * (ua * ua + self._disc * np.maximum(0.0, 0.5 * (t1 + t2)))
-        y_r = (-k.C_R4 * q) * delta
-        abs_delta = np.abs(delta)
-        x_force = (x_force + (t1 + t2) + k.m * vel_v * r
-                   - (k.C_R1 + (k.C_R2 + k.C_R3 * abs_delta) * abs_delta) * q)
-        y_force = y_force + y_r - k.m * vel_u * r
-        n_moment = n_moment + k.x_R * y_r + k.y_P * (t1 - t2)
-
-        i22, i23, i32, i33 = self._inv_m
-        out = np.empty(np.broadcast_shapes(x.shape[:-1], u.shape[:-1], d.shape[:-1]) + (6,))
-        out[..., 0] = x_force * self._inv_m11
-        out[..., 1] = i22 * y_force + i23 * n_moment
-        out[..., 2] = i32 * y_force + i33 * n_moment
-        out[..., 3], out[..., 4] = planar_to_ned(c, s, vel_u, vel_v)
-        out[..., 5] = r
-        return out
-
-    @staticmethod
-    def _polynomials(c: tuple[float, ...], u: FloatArray, v: FloatArray, r: FloatArray
-                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """The polynomial X, Y, N forces (N, N, N m) of one coefficient set ``c`` (see
-        ``_coefficients``); terms whose coefficient is 0 are skipped, which halves the cost."""
-        x_u, x_uu, x_vv, x_uv, y_v, y_vv, y_uv, n_v, n_r, n_vvv, n_rrr, n_vvr, n_vrr = c
-        uv = u * v
-        vv = v * v
-        x = (x_u + x_uu * np.abs(u)) * u + x_vv * vv
-        y = (y_v + y_vv * np.abs(v)) * v
-        if x_uv:
-            x = x + x_uv * uv
-        if y_uv:
-            y = y + y_uv * uv
-        n = n_v * v + n_r * r
-        if n_vvv or n_vvr or n_vrr:
-            n = n + (n_vvv * vv + (n_vvr * v + n_vrr * r) * r) * v
-        if n_rrr:
-            n = n + n_rrr * (r * r) * r
-        return x, y, n

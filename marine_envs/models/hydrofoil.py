@@ -51,8 +51,8 @@ from typing import ClassVar, Literal
 
 import numpy as np
 import scipy.optimize
-from numpy.typing import ArrayLike
 
+from ..compiled import Equations, jit
 from .base import FloatArray, VehicleModel, require
 
 
@@ -165,9 +165,70 @@ class HydrofoilTrim:
     h: FloatArray
 
 
-def _rows(a: FloatArray) -> FloatArray:
-    """The last axis first, as a contiguous array (so its rows unpack into 1-D arrays)."""
-    return np.ascontiguousarray(a.T if a.ndim <= 2 else np.moveaxis(a, -1, 0))
+#: Layout of the packed constants ``p`` of :func:`hydrofoil_rhs` (see :meth:`HydrofoilModel.pack`).
+(X1, X2, A1, A2, HALF_A1, HALF_A2, K1, K2, QS1, QS2, INDUCED1, INDUCED2, STRUT, STRUT_L, SPEED,
+ STALL, CD0, MASS, GRAVITY, ARM1, ARM2, ARM3, ARM4, THRUST) = range(24)
+INV_MASS = 24  # the 2x2 inverse mass matrix, row by row
+INERTIA, ADDED_MASS = 28, 29
+#: The values :func:`hydrofoil_forces` returns: generalised forces, then their pieces per foil.
+HEAVE, PITCH, LIFT, LIFT_COEFFICIENT, DRAG, STRUT_DRAG, SUBMERGENCE = 0, 1, 2, 4, 6, 8, 9
+
+
+@jit
+def hydrofoil_forces(x, u, d, p, thrust):
+    """Heave force (N, down) and pitch moment (N m, bow-up) of one craft at thrust ``thrust``
+    (N), and what they are made of, in the order of :data:`HEAVE` ...: lift, lift coefficient
+    and drag per foil, strut drag, submergence per foil."""
+    xi, theta, xi_dot, theta_dot = x[0], x[1], x[2], x[3]
+    x1, x2 = p[X1], p[X2]
+    sin, cos = np.sin(theta), np.cos(theta)
+    depth = xi + p[STRUT_L] * cos
+    h1 = depth - x1 * sin + d[2]
+    h2 = depth - x2 * sin + d[3]
+    U1, U2 = p[SPEED] - d[4], p[SPEED] - d[5]
+    alpha_1 = _clip((xi_dot - x1 * theta_dot + d[0]) / U1 + theta + u[0], p[STALL])
+    alpha_2 = _clip((xi_dot - x2 * theta_dot + d[1]) / U2 + theta + u[1], p[STALL])
+    # a*k(h/c) = a - (a/2)/(1 + 8 (h/c)^2), the same k(r) = (1 + 16r^2)/(2 + 16r^2)
+    C_L1 = (p[A1] - p[HALF_A1] / (1 + p[K1] * h1 * h1)) * alpha_1
+    C_L2 = (p[A2] - p[HALF_A2] / (1 + p[K2] * h2 * h2)) * alpha_2
+    q1 = p[QS1] * U1 * U1 if h1 > 0 else 0.0  # a broached foil (h <= 0) carries nothing
+    q2 = p[QS2] * U2 * U2 if h2 > 0 else 0.0
+    L1, L2 = q1 * C_L1, q2 * C_L2
+    D1 = q1 * (p[CD0] + p[INDUCED1] * C_L1 * C_L1)
+    D2 = q2 * (p[CD0] + p[INDUCED2] * C_L2 * C_L2)
+    mean_depth = 0.5 * (h1 + h2)
+    f = p[STRUT] * (0.0 if mean_depth < 0.0 else mean_depth)
+    heave = p[MASS] * p[GRAVITY] - (L1 + L2) - thrust * sin
+    pitch = p[ARM1] * L1 - p[ARM2] * L2 + p[ARM3] * thrust - p[STRUT_L] * (D1 + D2) - p[ARM4] * f
+    return heave, pitch, L1, L2, C_L1, C_L2, D1, D2, f, h1, h2
+
+
+@jit
+def _clip(alpha, stall):
+    """``alpha`` clipped to ``[-stall, stall]`` (NaN passes, as with ``np.clip``)."""
+    if alpha < -stall:
+        return -stall
+    return stall if alpha > stall else alpha
+
+
+@jit
+def hydrofoil_rhs(x, u, d, p, out):
+    """One craft's ``x_dot`` (docs/models.md 2.3); ``p`` packed by :meth:`HydrofoilModel.pack`."""
+    forces = hydrofoil_forces(x, u, d, p, p[THRUST])
+    heave, pitch = forces[HEAVE], forces[PITCH]
+    out[0], out[1] = x[2], x[3]
+    if p[ADDED_MASS] != 0.0:
+        i = INV_MASS
+        out[2] = p[i] * heave + p[i + 1] * pitch
+        out[3] = p[i + 2] * heave + p[i + 3] * pitch
+    else:
+        out[2], out[3] = heave / p[MASS], pitch / p[INERTIA]
+
+
+@jit
+def _forces_at(x, u, d, p, thrust):
+    """:func:`hydrofoil_forces` as an array (for the trim)."""
+    return np.array(hydrofoil_forces(x, u, d, p, thrust))
 
 
 class HydrofoilModel(VehicleModel):
@@ -188,17 +249,18 @@ class HydrofoilModel(VehicleModel):
     input_units: ClassVar[tuple[str, ...]] = ("rad", "rad")
     disturbance_units: ClassVar[tuple[str, ...]] = ("m/s", "m/s", "m", "m", "m/s", "m/s")
     is_linear: ClassVar[bool] = False
+    equations: ClassVar[Equations] = Equations(hydrofoil_rhs)
 
     def __init__(self, params: HydrofoilParams | None = None) -> None:
         super().__init__(HydrofoilParams() if params is None else params)
+        self._F0 = 0.0
+        self.trim = self._solve_trim()
+        self._F0 = self.trim.F0
+        self.__dict__.pop("constants", None)  # packed before the trim thrust was known
+
+    def pack(self) -> FloatArray:
+        """The constants of :func:`hydrofoil_rhs`, derived once: it runs 8x per control step."""
         p = self.params
-        # constants of rhs, precomputed: it runs 4x per control step on large batches
-        (self._x1, self._x2), (self._a1, self._a2) = p.foil_x, p.lift_curve_slope
-        self._half_a1, self._half_a2 = self._a1 / 2, self._a2 / 2
-        self._k1, self._k2 = 8 / p.chord**2  # 16 r^2 / 2 with r = h/c, 1/m^2
-        self._qS1, self._qS2 = 0.5 * p.rho * p.area  # dynamic pressure per U^2 x area, kg/m
-        self._induced1, self._induced2 = 1 / (np.pi * p.aspect_ratio)
-        self._strut = 0.5 * p.rho * p.U**2 * p.CDs * p.cs  # strut drag per m of depth, N/m
         if p.added_mass:
             ma = p.foil_added_mass
             xs = p.foil_x
@@ -206,11 +268,16 @@ class HydrofoilModel(VehicleModel):
                              [-(ma * xs).sum(), p.J + (ma * xs**2).sum()]])
         else:
             mass = np.diag([p.m, p.J])
-        # generalised forces [heave force (N), pitch moment (N m)] -> accelerations
-        self._inv_mass = np.linalg.inv(mass)
-        self._F0 = 0.0
-        self.trim = self._solve_trim()
-        self._F0 = self.trim.F0
+        a = p.lift_curve_slope
+        return np.concatenate([
+            p.foil_x, a, a / 2,
+            8 / p.chord**2,  # 16 r^2 / 2 with r = h/c, 1/m^2
+            0.5 * p.rho * p.area,  # dynamic pressure per U^2 x area, kg/m
+            1 / (np.pi * p.aspect_ratio),  # induced drag factor
+            [0.5 * p.rho * p.U**2 * p.CDs * p.cs,  # strut drag per m of depth, N/m
+             p.l, p.U, p.alpha_stall, p.CD0, p.m, p.g, p.l1, p.l2, p.l3, p.l4, self._F0],
+            # generalised forces [heave force (N), pitch moment (N m)] -> accelerations
+            np.linalg.inv(mass).ravel(), [p.J, float(p.added_mass)]])
 
     # -- nominal operating point -------------------------------------------------------------
     @property
@@ -235,61 +302,6 @@ class HydrofoilModel(VehicleModel):
         return np.array([-a, -a]), np.array([a, a])
 
     # -- dynamics ------------------------------------------------------------------------------
-    def _forces(self, x: FloatArray, u: FloatArray, d: FloatArray, F: float | FloatArray):
-        """Heave force (N, down), pitch moment (N m, bow-up) and the pieces they are made of.
-
-        Written foil by foil on contiguous 1-D arrays: on a (1024, n) batch this is ~1.5x faster
-        than a trailing foil axis, whose broadcasts and strided slices dominate the cost.
-        """
-        p = self.params
-        # one transposing copy per argument (contiguous rows; cheaper than moveaxis)
-        xi, theta, xi_dot, theta_dot = _rows(x)
-        alpha_s1, alpha_s2 = _rows(u)
-        zeta_dot_1, zeta_dot_2, eta_1, eta_2, u_w1, u_w2 = _rows(d)
-        x1, x2 = self._x1, self._x2
-        sin, cos = np.sin(theta), np.cos(theta)
-        depth = xi + p.l * cos
-        h1 = depth - x1 * sin + eta_1
-        h2 = depth - x2 * sin + eta_2
-        U1, U2 = p.U - u_w1, p.U - u_w2
-        stall = p.alpha_stall  # (minimum/maximum: np.clip costs several times more)
-        alpha_1 = np.minimum(np.maximum(
-            (xi_dot - x1 * theta_dot + zeta_dot_1) / U1 + theta + alpha_s1, -stall), stall)
-        alpha_2 = np.minimum(np.maximum(
-            (xi_dot - x2 * theta_dot + zeta_dot_2) / U2 + theta + alpha_s2, -stall), stall)
-        # a*k(h/c) = a - (a/2)/(1 + 8 (h/c)^2), the same k(r) = (1 + 16r^2)/(2 + 16r^2)
-        C_L1 = (self._a1 - self._half_a1 / (1 + self._k1 * h1 * h1)) * alpha_1
-        C_L2 = (self._a2 - self._half_a2 / (1 + self._k2 * h2 * h2)) * alpha_2
-        q1 = self._qS1 * U1 * U1 * (h1 > 0)  # a broached foil (h <= 0) carries nothing
-        q2 = self._qS2 * U2 * U2 * (h2 > 0)
-        L1, L2 = q1 * C_L1, q2 * C_L2
-        D1 = q1 * (p.CD0 + self._induced1 * C_L1 * C_L1)
-        D2 = q2 * (p.CD0 + self._induced2 * C_L2 * C_L2)
-        f = self._strut * np.maximum(0.5 * (h1 + h2), 0.0)
-        heave = p.m * p.g - (L1 + L2) - F * sin
-        pitch = p.l1 * L1 - p.l2 * L2 + p.l3 * F - p.l * (D1 + D2) - p.l4 * f
-        return heave, pitch, (L1, L2), (C_L1, C_L2), (D1, D2), f, (h1, h2)
-
-    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
-        """Continuous-time state derivative (docs/models.md 2.3).
-
-        :param x: ``[xi, theta, xi_dot, theta_dot]``, shape ``(..., 4)``, m, rad, m/s, rad/s.
-        :param u: ``[alpha_s1, alpha_s2]``, shape ``(..., 2)``, rad (absolute foil angles).
-        :param d: ``[zeta_dot_1, zeta_dot_2, eta_1, eta_2, u_w1, u_w2]``, shape ``(..., 6)``,
-            m/s, m/s, m, m, m/s, m/s; ``None`` means calm water.
-        :return: ``[xi_dot, theta_dot, xi_ddot, theta_ddot]``, shape ``(..., 4)``, m/s, rad/s,
-            m/s^2, rad/s^2.
-        """
-        x, u, d = self._split(x, u, d)
-        heave, pitch = self._forces(x, u, d, self._F0)[:2]
-        if self.params.added_mass:
-            M = self._inv_mass
-            xi_ddot = M[0, 0] * heave + M[0, 1] * pitch
-            theta_ddot = M[1, 0] * heave + M[1, 1] * pitch
-        else:
-            xi_ddot, theta_ddot = heave / self.params.m, pitch / self.params.J
-        return np.stack(np.broadcast_arrays(x[..., 2], x[..., 3], xi_ddot, theta_ddot), axis=-1)
-
     # -- trim ----------------------------------------------------------------------------------
     def _solve_trim(self) -> HydrofoilTrim:
         """Foil angles and thrust holding ``(xi0, theta0)`` in calm water at speed U.
@@ -303,9 +315,12 @@ class HydrofoilModel(VehicleModel):
         require(bool(np.all(h > 0)), "xi0", p.xi0,
                 f"must keep both foils submerged at trim (h = {h.tolist()} m)")
 
+        constants = self.pack()
+
         def residual(z: FloatArray) -> FloatArray:
-            heave, pitch, _, _, D, f, _ = self._forces(x0, z[:2], d0, z[2])
-            return np.array([heave, pitch, z[2] * math.cos(p.theta0) - D[0] - D[1] - f])
+            forces = _forces_at(x0, z[:2].copy(), d0, constants, z[2])
+            drag = forces[DRAG] + forces[DRAG + 1] + forces[STRUT_DRAG]
+            return np.array([forces[HEAVE], forces[PITCH], z[2] * math.cos(p.theta0) - drag])
 
         # initial guess: the weight shared by the foils in inverse ratio of their arms, no drag
         share = np.array([p.l2, p.l1]) / (p.l1 + p.l2) if p.l1 + p.l2 > 0 else np.full(2, 0.5)
@@ -323,6 +338,8 @@ class HydrofoilModel(VehicleModel):
                 f"must exceed the trim angles of attack {alpha.tolist()} rad")
         require(bool(np.all(np.abs(z[:2]) <= p.alpha_max)), "alpha_max", p.alpha_max,
                 f"must allow the trim foil angles {z[:2].tolist()} rad")
-        _, _, L, C_L, D, f, h = self._forces(x0, z[:2], d0, z[2])
-        return HydrofoilTrim(alpha_s0=z[:2].copy(), F0=float(z[2]), L=np.array(L),
-                             C_L=np.array(C_L), D=np.array(D), f=float(f), h=np.array(h))
+        forces = _forces_at(x0, z[:2].copy(), d0, constants, z[2])
+        pair = lambda i: forces[i:i + 2].copy()  # noqa: E731
+        return HydrofoilTrim(alpha_s0=z[:2].copy(), F0=float(z[2]), L=pair(LIFT),
+                             C_L=pair(LIFT_COEFFICIENT), D=pair(DRAG),
+                             f=float(forces[STRUT_DRAG]), h=pair(SUBMERGENCE))

@@ -2,8 +2,9 @@
 
 Axes are SNAME/NED: body x forward, y starboard, z down; ZYX Euler angles ``(phi, theta, psi)``
 (roll, pitch, yaw, rad). The matrices serve users and tests; the models' right-hand sides call
-the component forms, which take the angles' sines and cosines once computed (a batch's rows)
-and return one array per component, so that a batch of boats costs a few array operations.
+the component forms, compiled (:mod:`marine_envs.compiled`), which take the angles' sines and
+cosines once computed and return one value per component: scalars inside a compiled model, or
+arrays (a batch's rows) from Python.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..compiled import jit
 from .base import FloatArray
 
 #: ``(sin phi, sin theta, sin psi)`` or the cosines: scalars or arrays of one shape each.
@@ -48,6 +50,7 @@ def _cosines(*angles: float) -> tuple[float, ...]:
 
 
 # -- component forms (6 DOF) ---------------------------------------------------------------------
+@jit
 def body_to_ned(sin: Trig, cos: Trig, u: ArrayLike, v: ArrayLike, w: ArrayLike):
     """``Rzyx [u v w]``: a body-axes vector (e.g. the velocity) in NED, one array each."""
     sphi, sth, spsi = sin
@@ -58,6 +61,7 @@ def body_to_ned(sin: Trig, cos: Trig, u: ArrayLike, v: ArrayLike, w: ArrayLike):
     return cpsi * a - spsi * b, spsi * a + cpsi * b, cth * c - sth * u
 
 
+@jit
 def ned_to_body(sin: Trig, cos: Trig, north: ArrayLike, east: ArrayLike, down: ArrayLike):
     """``Rzyx^T [north east down]``: an NED vector (e.g. a current) in body axes."""
     sphi, sth, spsi = sin
@@ -68,6 +72,7 @@ def ned_to_body(sin: Trig, cos: Trig, north: ArrayLike, east: ArrayLike, down: A
     return cth * a - sth * down, cphi * b + sphi * c, cphi * c - sphi * b
 
 
+@jit
 def euler_rates(sin: Trig, cos: Trig, p: ArrayLike, q: ArrayLike, r: ArrayLike):
     """``Tzyx [p q r]``: the Euler-angle rates ``(phi_dot, theta_dot, psi_dot)`` (only the roll
     and pitch entries of ``sin``/``cos`` are used)."""
@@ -79,11 +84,13 @@ def euler_rates(sin: Trig, cos: Trig, p: ArrayLike, q: ArrayLike, r: ArrayLike):
 
 
 # -- component forms (3 DOF, the horizontal plane) -------------------------------------------------
+@jit
 def planar_to_ned(cos_psi: ArrayLike, sin_psi: ArrayLike, u: ArrayLike, v: ArrayLike):
     """``R(psi) [u v]``: surge and sway components in north and east."""
     return cos_psi * u - sin_psi * v, sin_psi * u + cos_psi * v
 
 
+@jit
 def planar_to_body(cos_psi: ArrayLike, sin_psi: ArrayLike, north: ArrayLike, east: ArrayLike):
     """``R(psi)^T [north east]``: a horizontal NED vector (a current, a wind) in surge and
     sway."""

@@ -22,7 +22,19 @@ from typing import ClassVar
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..compiled import Equations, jit
 from .base import FloatArray, VehicleModel, require
+
+#: Layout of the packed constants ``p`` of :func:`nomoto_rhs`.
+GAIN, TIME_CONSTANT, OFFSET = range(3)
+
+
+@jit
+def nomoto_rhs(x, u, d, p, out):
+    """One ship's ``x_dot`` (module docstring); ``p`` packed by :meth:`NomotoModel.pack`."""
+    r = x[0]
+    out[0] = (p[GAIN] * (u[0] + p[OFFSET]) - r) / p[TIME_CONSTANT] + d[0]
+    out[1] = r
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,6 +77,7 @@ class NomotoModel(VehicleModel):
     #: ``rhs`` reads K, T, delta0 at call time with numpy arithmetic: one value per row works.
     row_parameters: ClassVar[bool] = True
     lag_parameters: ClassVar[tuple[str, str]] = ("K", "T")
+    equations: ClassVar[Equations] = Equations(nomoto_rhs)
 
     def __init__(self, params: NomotoParams | None = None) -> None:
         super().__init__(NomotoParams() if params is None else params)
@@ -78,12 +91,9 @@ class NomotoModel(VehicleModel):
     def u_bounds(self) -> tuple[FloatArray, FloatArray]:
         return np.array([-self.params.delta_max]), np.array([self.params.delta_max])
 
-    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
-        x, u, d = self._split(x, u, d)
+    def pack(self) -> FloatArray:
         k = self.params
-        r = x[..., 0]
-        r_dot = (k.K * (u[..., 0] + k.delta0) - r) / k.T + d[..., 0]
-        return np.stack(np.broadcast_arrays(r_dot, r), axis=-1)
+        return np.stack(np.broadcast_arrays(k.K, k.T, k.delta0), axis=-1).astype(float)
 
     def linearize(self, x0: ArrayLike | None = None, u0: ArrayLike | None = None,
                   eps: float = 0.0) -> tuple[FloatArray, FloatArray, FloatArray]:

@@ -44,15 +44,17 @@ inertia accelerates the water-relative motion, ``M_A nu_r_dot = M_A nu_dot + M_A
 (``current_inertia="ground"``) drops the force ``-M_A [w x nu_c; 0]``; it is not energy-consistent:
 a drifting boat that turns in the current gains relative speed again instead of settling.
 
-**Implementation.** ``rhs`` is written for batches (one contiguous row per state): the forces are
-linear in a feature matrix ``F`` of products (``u|u|``, ``w q``, ``sin(theta)``, ``tau``, ...),
-``tau_total = C_0^T F + s dC^T F_morph``. ``M(s) = M_0 + s dM`` is inverted exactly for every
-``s`` through the generalised eigen-decomposition ``dM V = M_0 V diag(lam)``, ``V^T M_0 V = I``:
+**Implementation.** The equations of one boat are :func:`rov_rhs`, compiled
+(:mod:`marine_envs.compiled`); ``rhs`` runs them on every row of a batch and the environment's
+step kernel integrates them. The forces are linear in a feature vector ``F`` of products
+(``u|u|``, ``w q``, ``sin(theta)``, ``tau``, ...), ``tau_total = C_0^T F + s dC^T F_morph``
+(:func:`rov_features`, written once for the forces, the identification's regressors and the
+right-hand side). ``M(s) = M_0 + s dM`` is inverted exactly for every ``s`` through the
+generalised eigen-decomposition ``dM V = M_0 V diag(lam)``, ``V^T M_0 V = I``:
 ``M(s)^-1 = V diag(1 / (1 + s lam)) V^T``. With ``V^T`` folded into the coefficients, ``nu_dot``
-costs one (12 x 41) GEMM, a scaling and a 6x6 product (one 6-row GEMM with ``M_0^-1`` folded in
-when the whole batch is in cruise shape). Without a current the hydrodynamic and rigid-body
-``omega nu`` products coincide and are folded together. One boat is a batch of one: the
-equations exist once, in :meth:`ROVModel.rhs`.
+costs a (12 x 41) product, a scaling and a 6x6 product (one 6-row product with ``M_0^-1`` folded
+in when the hull is in cruise shape). Without a current the hydrodynamic and rigid-body
+``omega nu`` products coincide and are folded together.
 
 **Identification** (the morphing-robot patent). :data:`SEED_COEFFICIENTS` are the 18 viscous
 coefficients the patent identifies online. ``tau_hyd`` is linear in every coefficient:
@@ -73,6 +75,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
+from ..compiled import Equations, evaluate, jit, local_array, rows
 from .base import FloatArray, VehicleModel, require
 from .kinematics import body_to_ned, euler_rates, ned_to_body, skew
 from .rov_params import (
@@ -178,55 +181,124 @@ def _shape_free(hydro: Mapping[str, ArrayLike],
     return both
 
 
-def _feature_factors(row: int) -> tuple[int, int]:
-    """The two factors of feature row ``row`` as indices into ``[u_r v_r w_r p q r]``; a
-    second factor of -1 means ``|first|`` (the ``a|a|`` features)."""
-    if row < _OMR.stop:
-        return 3 + row // 3, row % 3  # omega_i nu_r_j
-    if row in (_UV, _UW):
-        return 0, row - _UV + 1
-    if _ABS.start <= row < _ABS.stop:
-        return row - _ABS.start, -1
-    i, j = _PAIRS[row - _ANG.start]
-    return 3 + i, 3 + j
-
-
 @functools.lru_cache(maxsize=64)
-def _hydro_layout(names: tuple[str, ...]):
-    """``(first, second, absolute, select)`` of the coefficients ``names``: factor indices of
-    each feature, which are ``a|a|``, and the (p, 6) map from terms to force rows."""
+def _hydro_layout(names: tuple[str, ...]) -> tuple[NDArray[np.intp], FloatArray]:
+    """``(features, select)`` of the coefficients ``names``: the feature row of each one's term
+    and the (p, 6) map from terms to force rows."""
     unknown = [n for n in names if n not in _HYDRO_ENTRIES]
     if unknown:
         raise ValueError(f"unknown hydrodynamic coefficient(s) {unknown}; known: "
                          f"{', '.join(HYDRO_COEFFICIENTS)}")
-    factors = np.array([_feature_factors(_HYDRO_ENTRIES[n][0]) for n in names],
-                       dtype=np.intp).reshape(-1, 2)
-    absolute = factors[:, 1] < 0
-    second = np.where(absolute, factors[:, 0], factors[:, 1])
+    features = np.array([_HYDRO_ENTRIES[n][0] for n in names], dtype=np.intp)
     select = np.zeros((len(names), 6))
     select[np.arange(len(names)), [_HYDRO_ENTRIES[n][1] for n in names]] = 1.0
-    return factors[:, 0], second, absolute, select
+    return features, select
 
 
-def _hydro_features(motion: FloatArray, first: NDArray[np.intp], second: NDArray[np.intp],
-                    absolute: NDArray[np.bool_]) -> FloatArray:
-    """Features (n, p) of the coefficients from the water-relative motion (n, 6)."""
-    other = motion[:, second]
-    if absolute.any():
-        other[:, absolute] = np.abs(other[:, absolute])
-    return motion[:, first] * other
+# -- the equations of one boat, compiled ------------------------------------------------------
+#: Layout of the packed constants ``p`` of :func:`rov_rhs` (see :meth:`ROVModel.pack`): the
+#: stacked [A; B] (12 x features) and P (6 x features) maps of the module docstring, with a
+#: current (every feature) and in still water (the features of _STILL), then V, lam and 1/T_m.
+_N_STILL = _STILL.stop - _STILL.start
+AB_CURRENT = 0
+AB_STILL = AB_CURRENT + 12 * _N_FEATURES
+P_CURRENT = AB_STILL + 12 * _N_STILL
+P_STILL = P_CURRENT + 6 * _N_FEATURES
+EIGENVECTORS = P_STILL + 6 * _N_STILL
+EIGENVALUES = EIGENVECTORS + 36
+INV_T_M = EIGENVALUES + 6
+#: ... and of the constants of :func:`rov_forces`: C_0^T (6 x features), dC^T (6 x morph features).
+C0T, DCT = 0, 6 * _N_FEATURES
+_N_MORPH = _MORPH.stop - _MORPH.start
 
 
-def _relative_motion(x: FloatArray, d: FloatArray) -> FloatArray:
-    """``[u_r v_r w_r p q r]`` (n, 6) of flat states (n, 13) in the NED current of ``d``: the
-    body velocity minus ``R(eta)^T v_c``."""
-    motion = x[:, :6].copy()
-    current = d[:, :3]
-    if not current.any():
-        return motion
-    angles = x[:, 9:12].T
-    motion[:, :3] -= np.array(ned_to_body(np.sin(angles), np.cos(angles), *current.T)).T
-    return motion
+@jit
+def rov_features(x, u, d, F):
+    """The feature vector F of one boat (module docstring), written to ``F`` in the order of the
+    layout above. Returns whether a current is present and the Euler angles' sines and
+    cosines."""
+    sin = (np.sin(x[9]), np.sin(x[10]), np.sin(x[11]))
+    cos = (np.cos(x[9]), np.cos(x[10]), np.cos(x[11]))
+    current = d[0] != 0.0 or d[1] != 0.0 or d[2] != 0.0
+    u_r, v_r, w_r = x[0], x[1], x[2]
+    if current:  # the hydrodynamic terms act on the velocity through the water
+        c_u, c_v, c_w = ned_to_body(sin, cos, d[0], d[1], d[2])
+        u_r, v_r, w_r = u_r - c_u, v_r - c_v, w_r - c_w
+    nur = (u_r, v_r, w_r, x[3], x[4], x[5])
+    for i in range(3):
+        for j in range(3):
+            F[3 * i + j] = x[3 + i] * nur[j]
+            F[_OMN.start + 3 * i + j] = x[3 + i] * x[j]
+    F[_UV], F[_UW] = u_r * v_r, u_r * w_r
+    for j in range(6):
+        F[_TAU.start + j] = u[j]
+        F[_ABS.start + j] = nur[j] * abs(nur[j])
+    ang = _ANG.start
+    for k in range(3):
+        F[ang + k] = x[3 + k] * x[3 + k]
+    F[ang + 3], F[ang + 4], F[ang + 5] = x[3] * x[4], x[3] * x[5], x[4] * x[5]
+    F[_RES.start] = sin[1]  # sin(theta), cos(theta) sin(phi), cos(theta) cos(phi)
+    F[_RES.start + 1] = cos[1] * sin[0]
+    F[_RES.start + 2] = cos[1] * cos[0]
+    return current, sin, cos
+
+
+@jit
+def rov_rhs(x, u, d, p, out):
+    """One boat's ``x_dot`` (module docstring); ``p`` packed by :meth:`ROVModel.pack`."""
+    F = local_array(_N_FEATURES)
+    current, sin, cos = rov_features(x, u, d, F)
+    first, width = (0, _N_FEATURES) if current else (_STILL.start, _N_STILL)
+    s = x[12]
+    if s != 0.0:  # nu_dot = V (A F + s B F[_MORPH]) / (1 + s lam)
+        Y = local_array(12)
+        _matvec(p, AB_CURRENT if current else AB_STILL, 12, width, F, first, Y)
+        y = local_array(6)
+        for i in range(6):
+            y[i] = (Y[i] + Y[6 + i] * s) / (1.0 + p[EIGENVALUES + i] * s)
+        _matvec(p, EIGENVECTORS, 6, 6, y, 0, out)
+    else:  # cruise shape: M0^-1 is folded into one matrix
+        _matvec(p, P_CURRENT if current else P_STILL, 6, width, F, first, out)
+    # kinematics: NED velocity and Euler-angle rates
+    out[6], out[7], out[8] = body_to_ned(sin, cos, x[0], x[1], x[2])
+    out[9], out[10], out[11] = euler_rates(sin, cos, x[3], x[4], x[5])
+    out[12] = (d[3] - s) * p[INV_T_M]
+
+
+@jit
+def rov_forces(x, u, d, p, out):
+    """One boat's total generalised force ``-C_RB nu + tau_hyd + tau_s + tau`` (N, N m);
+    ``p`` = :attr:`ROVModel.force_constants`."""
+    F = local_array(_N_FEATURES)
+    rov_features(x, u, d, F)
+    morph = local_array(6)
+    _matvec(p, C0T, 6, _N_FEATURES, F, 0, out)
+    _matvec(p, DCT, 6, _N_MORPH, F, _MORPH.start, morph)
+    for i in range(6):
+        out[i] += x[12] * morph[i]
+
+
+@jit
+def rov_feature_row(x, u, d, p, out):
+    """The feature vector of one boat (the identification's regressors)."""
+    rov_features(x, u, d, out)
+
+
+@jit
+def _matvec(p, offset, n_rows, width, F, first, out):
+    """``out[:n_rows] = P @ F[first:first + width]`` with ``P`` stored row by row from
+    ``p[offset]``; each row summed in the order of the features, the rows side by side (their
+    sums are independent: the processor runs them in parallel)."""
+    for i in range(n_rows):
+        out[i] = 0.0
+    for j in range(width):
+        f = F[first + j]
+        for i in range(n_rows):
+            out[i] += p[offset + i * width + j] * f
+
+
+_FORCES = rows(rov_forces)
+_FEATURES = rows(rov_feature_row)
 
 
 class ROVModel(VehicleModel):
@@ -249,6 +321,7 @@ class ROVModel(VehicleModel):
     #: Nominal point: REMUS cruise speed, m/s, and depth, m.
     cruise_speed: ClassVar[float] = 1.5
     cruise_depth: ClassVar[float] = 5.0
+    equations: ClassVar[Equations] = Equations(rov_rhs)
 
     def __init__(self, params: ROVParams | None = None) -> None:
         super().__init__(ROVParams() if params is None else params)
@@ -282,17 +355,14 @@ class ROVModel(VehicleModel):
                     "too far from symmetric for the exact morph inverse")
             lam, V = lam.real, V.real
             L = np.linalg.solve(V, np.linalg.inv(M0))
-        self._lam, self._lam_col, self._V = lam, lam[:, None].copy(), np.ascontiguousarray(V)
-        self._L = np.ascontiguousarray(L)
-        # nu_dot = V (A F + s B F[_MORPH]) / (1 + s lam); with s = 0 everywhere: nu_dot = P F
+        self._lam, self._V, self._L = lam, np.ascontiguousarray(V), np.ascontiguousarray(L)
+        # nu_dot = V (A F + s B F[_MORPH]) / (1 + s lam); in cruise shape: nu_dot = P F
         A_cur, A_still = L @ C0_cur.T, L @ still.T
-        self._P_cur, self._P_still = V @ A_cur, V @ A_still
-        # [A; B] stacked over the features in use: one GEMM for both (B padded with zeros)
-        self._AB_cur = np.zeros((12, _N_FEATURES))
-        self._AB_cur[:6], self._AB_cur[6:, _MORPH] = A_cur, L @ dC[_MORPH].T
-        self._AB_still = self._AB_cur[:, _STILL].copy()
-        self._AB_still[:6] = A_still
-        self._inv_T_m = 1.0 / k.T_m
+        AB_cur = np.zeros((12, _N_FEATURES))  # [A; B] over every feature (B zero outside)
+        AB_cur[:6], AB_cur[6:, _MORPH] = A_cur, L @ dC[_MORPH].T
+        AB_still = AB_cur[:, _STILL].copy()
+        AB_still[:6] = A_still
+        self._maps = (AB_cur, AB_still, V @ A_cur, V @ A_still)
         self._x0 = np.zeros(len(self.state_names))
         self._x0[[0, 8]] = self.cruise_speed, self.cruise_depth
         self._u0 = self.trim_forces(self.cruise_speed, 0.0)
@@ -341,14 +411,28 @@ class ROVModel(VehicleModel):
         return 0.0 - self.forces(x, np.zeros(6), np.array([0.0, 0.0, 0.0, s]))  # no -0.0
 
     # -- dynamics ------------------------------------------------------------------------------
+    def pack(self) -> FloatArray:
+        """The constants of :func:`rov_rhs`: the maps of the module docstring, V, lam, 1/T_m."""
+        return np.concatenate([*(a.ravel() for a in self._maps), self._V.ravel(), self._lam,
+                               [1.0 / self.params.T_m]])
+
+    @functools.cached_property
+    def force_constants(self) -> FloatArray:
+        """The constants of :func:`rov_forces`: C_0^T and dC^T row by row."""
+        return np.concatenate([self._C0T.ravel(), self._dCT.ravel()])
+
     def forces(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
         """Total generalised force at the CB, ``-C_RB nu + tau_hyd + tau_s + tau`` (N, N m),
         shape ``(..., 6)``: the right-hand side of ``M(s) nu_dot = ...``."""
-        x, u, d, shape = self._flat(x, u, d)
-        xt = np.ascontiguousarray(x.T)
-        F, _, _ = self._features(xt, u, d, full=True)
-        tau = self._C0T @ F + xt[12] * (self._dCT @ F[_MORPH])
-        return tau.T.reshape(*shape, 6)
+        x, u, d = self._split(x, u, d)
+        return evaluate(_FORCES, x, u, d, self.force_constants, width=6)
+
+    def features(self, x: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
+        """The feature vector F of the module docstring (products of the water-relative motion,
+        the inputs, the restoring terms), shape ``(..., 41)``, of states ``(..., 13)`` with
+        disturbances ``d`` (None = still water, no morph command)."""
+        x, u, d = self._split(x, np.zeros(6), d)
+        return evaluate(_FEATURES, x, u, d, np.zeros(1), width=_N_FEATURES)
 
     def hydrodynamic_regressors(self, x: ArrayLike, names: Sequence[str],
                                 d: ArrayLike | None = None) -> FloatArray:
@@ -361,11 +445,9 @@ class ROVModel(VehicleModel):
         :param d: disturbances (current, m/s; morph command), shape ``(..., 4)``; None = zero.
         :return: shape ``(..., 6, p)``; force rows N or N m per coefficient unit.
         """
-        first, second, absolute, select = _hydro_layout(tuple(names))
-        x, _, d, shape = self._flat(x, np.zeros(6), d)
-        features = _hydro_features(_relative_motion(x, d), first, second, absolute)
-        out = features[:, None, :] * select.T[None]
-        return out.reshape(*shape, 6, len(first))
+        rows_of, select = _hydro_layout(tuple(names))
+        terms = self.features(x, d)[..., rows_of]
+        return terms[..., None, :] * select.T
 
     def rhs_with(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,
                  params: Mapping[str, ArrayLike]) -> FloatArray:
@@ -393,11 +475,11 @@ class ROVModel(VehicleModel):
             other = {k: v for k, v in params.items() if k not in _HYDRO_ENTRIES}
             return super().rhs_with(x, u, d, _shape_free(hydro, other))
         x, u, d, theta, shape = self._batch_with(x, u, d, list(hydro.values()))
-        first, second, absolute, select = _hydro_layout(tuple(hydro))
+        rows_of, select = _hydro_layout(tuple(hydro))
         cruise, change = self._morph_line(tuple(hydro))
-        features = _hydro_features(_relative_motion(x, d), first, second, absolute)
-        features *= theta - (cruise + x[:, 12:13] * change)
-        return self.rhs(x, u + features @ select, d).reshape(*shape, 13)
+        terms = self.features(x, d)[:, rows_of]
+        terms *= theta - (cruise + x[:, 12:13] * change)
+        return self.rhs(x, u + terms @ select, d).reshape(*shape, 13)
 
     def parameter_jacobian(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,
                            params: Mapping[str, ArrayLike]) -> FloatArray | None:
@@ -408,14 +490,13 @@ class ROVModel(VehicleModel):
         if not params or not set(params) <= _HYDRO_ENTRIES.keys():
             return super().parameter_jacobian(x, u, d, params)
         x, _, d, _, shape = self._batch_with(x, u, d, list(params.values()))
-        first, second, absolute, select = _hydro_layout(tuple(params))
-        features = _hydro_features(_relative_motion(x, d), first, second, absolute)
-        phi = features[:, None, :] * select.T[None]  # (n, 6, p)
+        rows_of, select = _hydro_layout(tuple(params))
+        phi = self.features(x, d)[:, None, rows_of] * select.T[None]  # (n, 6, p)
         # M(s)^-1 = V diag(1 / (1 + s lam)) L, exact for every s
         scaled = (self._L @ phi) / (1.0 + x[:, 12, None, None] * self._lam[:, None])
-        out = np.zeros((x.shape[0], 13, len(first)))
+        out = np.zeros((x.shape[0], 13, len(rows_of)))
         out[:, :6] = self._V @ scaled
-        return out.reshape(*shape, 13, len(first))
+        return out.reshape(*shape, 13, len(rows_of))
 
     def _batch_with(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,
                     values: list[ArrayLike]):
@@ -441,83 +522,6 @@ class ROVModel(VehicleModel):
         change = np.array([getattr(k, f"work_{n}") - getattr(k, n) if n in MORPHING else 0.0
                            for n in names])
         return cruise, change
-
-    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
-        x, u, d, shape = self._flat(x, u, d)
-        xt = np.ascontiguousarray(x.T)  # one row per state: contiguous rows for every op
-        F, (sin, cos), current = self._features(xt, u, d)
-        out = np.empty((13, xt.shape[1]))
-        s = xt[12]
-        used = F if current else F[_STILL]
-        if s.any():
-            Y = (self._AB_cur if current else self._AB_still) @ used
-            y = Y[:6]
-            y += np.multiply(Y[6:], s, out=Y[6:])
-            y /= 1.0 + self._lam_col * s
-            np.matmul(self._V, y, out=out[:6])
-        else:  # the whole batch in cruise shape: M0^-1 is folded into one matrix
-            np.matmul(self._P_cur if current else self._P_still, used, out=out[:6])
-        # kinematics: NED velocity and Euler-angle rates
-        out[6], out[7], out[8] = body_to_ned(sin, cos, *xt[:3])
-        out[9], out[10], out[11] = euler_rates(sin, cos, *xt[3:6])
-        np.subtract(d[:, 3], s, out=out[12])
-        out[12] *= self._inv_T_m
-        return out.T.reshape(*shape, 13)
-
-    def _flat(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None):
-        """x, u, d as 2-D arrays over one flattened batch, and the batch shape."""
-        x = np.asarray(x, dtype=float)
-        u = np.asarray(u, dtype=float)
-        d = np.zeros(4) if d is None else np.asarray(d, dtype=float)
-        if x.ndim == 2 and x.shape[1] == 13 and u.shape == (x.shape[0], 6) \
-                and d.shape == (x.shape[0], 4):
-            return x, u, d, x.shape[:1]  # the vector environment's hot path
-        if x.shape == (13,) and u.shape == (6,) and d.shape == (4,):
-            return x[None], u[None], d[None], ()  # one boat
-        x, u, d = self._split(x, u, d)
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], d.shape[:-1])
-        return (np.broadcast_to(x, (*shape, 13)).reshape(-1, 13),
-                np.broadcast_to(u, (*shape, 6)).reshape(-1, 6),
-                np.broadcast_to(d, (*shape, 4)).reshape(-1, 4), shape)
-
-    def _features(self, xt: FloatArray, u: FloatArray, d: FloatArray, full: bool = False):
-        """Feature matrix F (41, n) from the state rows ``xt`` (13, n), the Euler angles' sines
-        and cosines (3, n) each, and whether a current is present. Without a current (and
-        ``full`` False) the rows ``_OMR`` are left unset: ``_STILL`` folds them into ``_OMN``."""
-        n = xt.shape[1]
-        F = np.empty((_N_FEATURES, n))
-        # sin and cos from one tan, t = tan(a/2): sin = 2t/(1+t^2), cos = 2/(1+t^2) - 1
-        # (cheaper than np.sin + np.cos, within a few ulp of them)
-        t = np.tan(0.5 * xt[9:12])
-        two_den = np.multiply(t, t)
-        two_den += 1.0
-        np.divide(2.0, two_den, out=two_den)
-        sin = t * two_den
-        cos = np.subtract(two_den, 1.0, out=two_den)
-        nu1, om = xt[0:3], xt[3:6]
-        cur = d[:, :3]
-        current = bool(cur.any())
-        if current:
-            nur = F[_ABS]  # u_r v_r w_r p q r, squared in place once the products are taken
-            np.subtract(nu1, ned_to_body(sin, cos, *cur.T), out=nur[:3])
-            nur[3:] = om
-            nur1 = nur[:3]
-        else:
-            nur, nur1 = xt[:6], nu1
-        if current or full:
-            np.multiply(om[:, None, :], nur1[None, :, :], out=F[_OMR].reshape(3, 3, n))
-        np.multiply(nur1[0], nur1[1:3], out=F[_UV:_UW + 1])
-        np.multiply(nur, np.abs(nur), out=F[_ABS])
-        np.multiply(om[:, None, :], nu1[None, :, :], out=F[_OMN].reshape(3, 3, n))
-        ang = _ANG.start
-        np.multiply(om, om, out=F[ang:ang + 3])
-        np.multiply(om[0], om[1:3], out=F[ang + 3:ang + 5])
-        np.multiply(om[1], om[2], out=F[ang + 5])
-        F[_RES.start] = sin[1]  # sin(theta), cos(theta) sin(phi), cos(theta) cos(phi)
-        np.multiply(cos[1], sin[0], out=F[_RES.start + 1])
-        np.multiply(cos[1], cos[0], out=F[_RES.start + 2])
-        F[_TAU] = u.T
-        return F, (sin, cos), current
 
 
 __all__ = ["HYDRO_COEFFICIENTS", "MORPHING", "SEED_COEFFICIENTS", "THRUSTER_ALLOCATION",

@@ -24,7 +24,26 @@ from typing import ClassVar, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..compiled import Equations, jit
 from .base import FloatArray, VehicleModel, require
+
+#: Layout of the packed constants ``p`` of :func:`usv_rhs`.
+KVR, WN, ZETA, KDR, TR, TV, KDV, KVP, KDP, MOMENT = range(10)
+
+
+@jit
+def usv_rhs(x, u, d, p, out):
+    """One boat's ``x_dot`` (module docstring); ``p`` packed by :meth:`USVModel.pack`."""
+    v, r, p_roll, phi = x[0], x[1], x[3], x[4]
+    delta = u[0]
+    moment = p[MOMENT] != 0.0
+    w_psi, w_phi = d[0], d[1]
+    out[0] = (-v + p[KDV] * delta) / p[TV]
+    out[1] = (p[KVR] * v - r + p[KDR] * delta) / p[TR] + (w_psi if moment else 0.0)
+    out[2] = r + (0.0 if moment else w_psi)
+    out[3] = p[WN] ** 2 * (p[KVP] * v + p[KDP] * delta - phi) \
+        - 2 * p[ZETA] * p[WN] * p_roll + (w_phi if moment else 0.0)
+    out[4] = p_roll + (0.0 if moment else w_phi)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,6 +89,7 @@ class USVModel(VehicleModel):
     measured_names: ClassVar[tuple[str, ...]] = ("r", "psi", "p", "phi")
     is_linear: ClassVar[bool] = True
     row_parameters: ClassVar[bool] = True
+    equations: ClassVar[Equations] = Equations(usv_rhs)
 
     def __init__(self, params: USVParams | None = None) -> None:
         super().__init__(USVParams() if params is None else params)
@@ -78,20 +98,11 @@ class USVModel(VehicleModel):
     def u_bounds(self) -> tuple[FloatArray, FloatArray]:
         return np.array([-self.params.delta_max]), np.array([self.params.delta_max])
 
-    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
-        x, u, d = self._split(x, u, d)
+    def pack(self) -> FloatArray:
         k = self.params
-        v, r, psi, p, phi = np.moveaxis(x, -1, 0)
-        delta = u[..., 0]
-        w_psi, w_phi = d[..., 0], d[..., 1]
-        moment = k.wave_input == "moment"
-        v_dot = (-v + k.Kdv * delta) / k.Tv
-        r_dot = (k.Kvr * v - r + k.Kdr * delta) / k.Tr + (w_psi if moment else 0.0)
-        psi_dot = r + (0.0 if moment else w_psi)
-        p_dot = k.wn**2 * (k.Kvp * v + k.Kdp * delta - phi) - 2 * k.zeta * k.wn * p \
-            + (w_phi if moment else 0.0)
-        phi_dot = p + (0.0 if moment else w_phi)
-        return np.stack(np.broadcast_arrays(v_dot, r_dot, psi_dot, p_dot, phi_dot), axis=-1)
+        moment = 1.0 if k.wave_input == "moment" else 0.0
+        return np.stack(np.broadcast_arrays(k.Kvr, k.wn, k.zeta, k.Kdr, k.Tr, k.Tv, k.Kdv, k.Kvp,
+                                            k.Kdp, moment), axis=-1).astype(float)
 
     def linearize(self, x0: ArrayLike | None = None, u0: ArrayLike | None = None,
                   eps: float = 0.0) -> tuple[FloatArray, FloatArray, FloatArray]:

@@ -69,10 +69,11 @@ class GaussMarkov:
             self.a = np.exp(-dt / tau)
         self.gain = self.std * np.sqrt(1 - self.a**2)
         self.width = width
-        self._stream = BlockStream(width, self._fill)
+        #: The rows, a block at a time per boat (read by the compiled step kernel too).
+        self.stream = BlockStream(width, self._fill)
 
     def bind(self, batch_size: int) -> None:
-        self._stream.bind(batch_size)
+        self.stream.bind(batch_size)
         self._rngs: list[np.random.Generator] = [np.random.default_rng(0)] * batch_size
         self._last = np.zeros((batch_size, self.width))
         self._start = np.ones(batch_size, dtype=bool)
@@ -81,10 +82,10 @@ class GaussMarkov:
         for i, rng in zip(idx, rngs, strict=True):
             self._rngs[i] = rng
         self._start[idx] = True
-        self._stream.restart(idx)
+        self.stream.restart(idx)
 
     def step(self) -> FloatArray:
-        return self._stream.next()
+        return self.stream.next()
 
     def _fill(self, idx: NDArray[np.intp]) -> FloatArray:
         noise = np.stack([self._rngs[i].standard_normal((BLOCK, self.width)) for i in idx])

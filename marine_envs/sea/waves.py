@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..blocks import BLOCK, BlockStream
+from ..compiled import jit
 from .spectra import MeasuredSpectrum, jonswap, pierson_moskowitz
 
 G = 9.81  #: gravity, m/s^2
@@ -233,9 +234,10 @@ class WaveRealisation:
         self._rotations = np.exp(1j * np.outer(self._step_times, self.omega_e))  # (BLOCK, n)
         self._cos_sin = np.hstack([self._rotations.real, self._rotations.imag])
         self._block_rotation = np.exp(1j * self.omega_e * BLOCK * dt)
-        self._stream = BlockStream(0, self._blocks)
+        #: The rows, a block at a time per boat (read by the compiled step kernel too).
+        self.stream = BlockStream(0, self._blocks)
         response = np.asarray(coupling(self.omega), dtype=complex)
-        self.n_channels = self._stream.width = response.shape[1]
+        self.n_channels = self.stream.width = response.shape[1]
         self._hs_grid: NDArray[np.float64] | None = None
         self._shaped_cache: dict[float, NDArray[np.float64]] = {}
         if sea.varying and sea.shape_follows_hs:
@@ -260,18 +262,18 @@ class WaveRealisation:
         #: each boat's phasors exp(i(omega_e t + eps)) and time t (s) at the start of its next block
         self.phasor = np.ones((batch_size, self.omega.size), dtype=complex)
         self.block_time = np.zeros(batch_size)
-        self._stream.bind(batch_size)
+        self.stream.bind(batch_size)
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         """New random phases for boats ``idx`` from their generators; their time restarts at 0."""
         for i, rng in zip(idx, rngs, strict=True):
             self.phasor[i] = np.exp(1j * rng.uniform(0.0, 2 * math.pi, self.omega.size))
         self.block_time[idx] = 0.0
-        self._stream.restart(idx)
+        self.stream.restart(idx)
 
     def step(self) -> NDArray[np.float64]:
         """Disturbance (batch x channels) at the current time; then advance by ``dt``."""
-        return self._stream.next()
+        return self.stream.next()
 
     def _blocks(self, idx: NDArray[np.intp]) -> NDArray[np.float64]:
         """The next ``BLOCK`` steps of boats ``idx`` (boats x BLOCK x channels)."""
@@ -309,13 +311,12 @@ class WaveRealisation:
             hs = self.sea.hs(times)  # type: ignore[operator]
             pos = np.interp(hs, self._hs_grid, np.arange(self._hs_grid.size))
             j = np.minimum(pos.astype(np.intp), self._hs_grid.size - 2)
-            w = (pos - j)[:, None, None]
-            gain = (1 - w) * self._gain_table[j] + w * self._gain_table[j + 1]  # (BLOCK, n, c)
-            weights = self._rotations[:, :, None] * gain  # (BLOCK, n, c)
-            stacked = np.concatenate([weights.real, -weights.imag], axis=1)  # (BLOCK, 2n, c)
+            n, c = self.omega.size, self.n_channels
+            weights = np.empty((2 * n, BLOCK * c))
+            _shaped_weights(self._rotations, self._gain_table, j, pos - j, weights)
             if len(self._shaped_cache) >= SHAPED_CACHE:
                 del self._shaped_cache[next(iter(self._shaped_cache))]  # the oldest
-            self._shaped_cache[start] = stacked.transpose(1, 0, 2).reshape(stacked.shape[1], -1)
+            self._shaped_cache[start] = weights
         return self._shaped_cache[start]
 
     def sample(self, n_steps: int, rng: np.random.Generator) -> NDArray[np.float64]:
@@ -323,3 +324,22 @@ class WaveRealisation:
         self.bind(1)
         self.reset(np.array([0]), [rng])
         return np.concatenate([self.step() for _ in range(n_steps)])
+
+
+@jit
+def _shaped_weights(rotations, table, j, w, out):
+    """The weights of :meth:`WaveRealisation._shaped_weights`: ``out[i, t c + k]`` is the real
+    part (``i < n``) or minus the imaginary part (``i = n + i'``) of ``rotations[t, i] *
+    G_ik(Hs(t))``, the gains interpolated between rows ``j[t]`` and ``j[t] + 1`` of ``table`` with
+    weight ``w[t]`` (compiled: a block per boat of a single environment would otherwise cost
+    more than its 256 steps of physics)."""
+    steps, n = rotations.shape
+    c = table.shape[2]
+    for t in range(steps):
+        row, weight = j[t], w[t]
+        for i in range(n):
+            for k in range(c):
+                gain = (1 - weight) * table[row, i, k] + weight * table[row + 1, i, k]
+                z = rotations[t, i] * gain
+                out[i, t * c + k] = z.real
+                out[n + i, t * c + k] = -z.imag

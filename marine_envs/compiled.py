@@ -1,0 +1,240 @@
+"""The compiled back end: numba, single-threaded, no fastmath, cached on disk.
+
+Every hot loop of the project is a function made by :func:`jit`. Each model's equations are
+written once, on one boat's scalars (``rhs(x, u, d, p, out)`` with ``p`` the model's packed
+constants), and everything else is generated from them: :func:`rows` applies such a function to
+every row of a batch (what ``VehicleModel.rhs`` calls) and :func:`rk4` integrates one boat (what
+the environments' step kernel calls). ``error_model="numpy"`` keeps numpy's arithmetic (a
+division by zero gives inf, not an exception), so a compiled function means what the numpy
+expression it replaces meant.
+
+Caching: machine code is kept on disk beside the sources (numba's ``__pycache__``, or
+``NUMBA_CACHE_DIR``), so a machine compiles each function once. numba keys its cache on the
+function's own bytecode only: a kernel that calls a model's equations from another file would run
+stale machine code after the equations were edited, and a function made by a factory (a closure
+over the equations) would miss the cache in every new process (numba hashes the pickled closure,
+which holds a random identifier). :func:`jit` keys it instead on the source of the function and
+of every compiled function it reaches (globals by name, closure cells), recursively.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import types
+from collections.abc import Callable
+from functools import cache
+from typing import Any, TypeVar
+
+import numba
+import numpy as np
+from numba.core import cgutils
+from numba.core import types as nb_types
+from numba.core.caching import FunctionCache
+from numba.core.registry import CPUDispatcher
+from numba.extending import intrinsic
+
+F = TypeVar("F", bound=Callable[..., Any])
+#: Options of every compiled function. ``inline="always"``: a compiled function called from
+#: compiled code is merged into its caller (numba passes every array as seven machine words, so a
+#: call of a model's equations cost more than the equations); called from Python it runs as
+#: usual. ``nogil``: a batch may be stepped in a thread of its own.
+OPTIONS = {"inline": "always", "nogil": True, "error_model": "numpy", "fastmath": False}
+
+
+def jit(func: F | None = None, **options: Any) -> F:
+    """``numba.njit`` with the project's options and a source-keyed disk cache.
+
+    :param func: the function (use as ``@jit`` or ``@jit(inline="always")``).
+    :param options: further ``numba.njit`` options.
+    """
+    if func is None:
+        return lambda f: jit(f, **options)  # type: ignore[return-value]
+    dispatcher = numba.njit(**{**OPTIONS, **options})(func)
+    try:
+        dispatcher._cache = _SourceKeyedCache(func)
+    except RuntimeError:  # no file to keep it beside (an interactive session): compile each time
+        pass
+    return dispatcher
+
+
+class _SourceKeyedCache(FunctionCache):
+    """numba's function cache with :func:`fingerprint` as the key (see the module docstring)."""
+
+    def _index_key(self, sig, codegen):
+        return sig, codegen.magic_tuple(), fingerprint(self._py_func)
+
+
+def fingerprint(func: Callable[..., Any]) -> str:
+    """A hash of ``func``'s bytecode and constant closure values, and of the source files of
+    ``func`` and of every compiled function it reaches."""
+    digest = hashlib.sha256()
+    files: set[str] = set()
+    for code, cells in _reach(func, files, set()):
+        digest.update(code)
+        digest.update(cells.encode())
+    for path in sorted(files):
+        digest.update(_file_hash(path).encode())
+    return digest.hexdigest()
+
+
+def _reach(func: Callable[..., Any], files: set[str], seen: set[int]):
+    """``(bytecode, closure constants)`` of ``func`` and of the compiled functions it reaches;
+    their source files are added to ``files``."""
+    if id(func) in seen:
+        return
+    seen.add(id(func))
+    files.add(func.__code__.co_filename)
+    constants = []
+    for cell in func.__closure__ or ():
+        value = cell.cell_contents
+        if isinstance(value, CPUDispatcher):
+            yield from _reach(value.py_func, files, seen)
+        elif isinstance(value, int | float | bool | str | tuple | type(None)):
+            constants.append(repr(value))
+        else:
+            raise TypeError(f"compiled function {func.__qualname__} closes over a "
+                            f"{type(value).__name__}; only compiled functions and plain "
+                            "constants can be cached")
+    yield func.__code__.co_code, "|".join(constants)
+    for name in _names(func.__code__):
+        value = func.__globals__.get(name)
+        if isinstance(value, types.ModuleType):
+            value = None
+        if isinstance(value, CPUDispatcher):
+            yield from _reach(value.py_func, files, seen)
+
+
+def _names(code: types.CodeType) -> set[str]:
+    """Global names used by ``code`` and the code objects nested in it."""
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            names |= _names(const)
+    return names
+
+
+@cache
+def _file_hash(path: str) -> str:
+    try:
+        with open(path, "rb") as f:
+            return hashlib.sha256(f.read()).hexdigest()
+    except OSError:  # no source (a frozen or zipped module): its path stands in
+        return path
+
+
+# -- scratch on the stack -----------------------------------------------------------------------
+@intrinsic
+def _stack_buffer(typingctx, size):
+    """A pointer to ``size`` float64 on the stack frame of the outermost compiled caller."""
+    if not isinstance(size, nb_types.IntegerLiteral):
+        return None
+    n = size.literal_value
+
+    def codegen(context, builder, signature, args):
+        return cgutils.alloca_once(builder, context.get_value_type(nb_types.float64), size=n)
+
+    return nb_types.CPointer(nb_types.float64)(size), codegen
+
+
+@jit
+def local_array(size):
+    """A 1-D float64 array of ``size`` (a literal number) on the stack: scratch for compiled
+    code that runs millions of times (numba's ``np.empty`` is a heap allocation each time).
+    Uninitialised; valid until the outermost compiled caller returns (never return it)."""
+    return numba.carray(_stack_buffer(size), (size,))
+
+
+# -- generated from one boat's equations ---------------------------------------------------------
+#: ``f(x, u, d, p, out)``: one boat's state derivative written to ``out`` (a model's equations).
+RightHandSide = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
+
+
+def rows(core: RightHandSide) -> Callable[..., None]:
+    """The function ``f(X, U, D, P, OUT)`` applying ``core`` to every row of 2-D arrays; ``P``
+    has one row per boat or a single row for all."""
+
+    @jit
+    def over_rows(X, U, D, P, OUT):
+        shared = P.shape[0] == 1
+        for b in range(X.shape[0]):
+            core(X[b], U[b], D[b], P[0] if shared else P[b], OUT[b])
+
+    return over_rows
+
+
+def rk4(core: RightHandSide) -> Callable[..., None]:
+    """The function ``f(x, u, d, p, h, substeps, out, work)``: ``substeps`` classical
+    Runge-Kutta steps of ``h`` seconds of ``x_dot = core(x, u, d, p)`` from ``x``, inputs held,
+    written to ``out``; ``work`` is scratch of shape ``(3, n_x)``. The same arithmetic, in the
+    same order, as :func:`marine_envs.models.integrate.rk4`; ``core`` is called from one place,
+    so that it is merged into the step once."""
+
+    @jit
+    def step(x, u, d, p, h, substeps, out, work):
+        n = x.size
+        k, total, z = work[0], work[1], work[2]
+        out[:] = x
+        for _ in range(substeps):
+            z[:] = out
+            for stage in range(4):
+                core(z, u, d, p, k)
+                if stage == 0:
+                    total[:] = k
+                elif stage == 3:
+                    for i in range(n):
+                        total[i] += k[i]
+                else:
+                    for i in range(n):
+                        total[i] += 2 * k[i]
+                if stage < 3:
+                    ahead = 0.5 * h if stage < 2 else h
+                    for i in range(n):
+                        z[i] = out[i] + ahead * k[i]
+            for i in range(n):
+                out[i] = out[i] + h / 6 * total[i]
+
+    return step
+
+
+class Equations:
+    """One boat's equations ``core(x, u, d, p, out)`` and the functions generated from them.
+
+    :param core: the compiled function (made by :func:`jit`); ``p`` is the model's packed
+        constants (one row for every boat, or one row per boat).
+    :ivar over_rows: ``core`` applied to every row (:func:`rows`).
+    :ivar rk4: one boat integrated by Runge-Kutta steps (:func:`rk4`).
+    """
+
+    def __init__(self, core: RightHandSide) -> None:
+        self.core, self.over_rows, self.rk4 = core, rows(core), rk4(core)
+
+    def __call__(self, x: np.ndarray, u: np.ndarray, d: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """``x_dot`` over the broadcast batch shape of ``x, u, d, p`` (each ``(..., n)``)."""
+        return evaluate(self.over_rows, x, u, d, p)
+
+
+def evaluate(over_rows: Callable[..., None], x: np.ndarray, u: np.ndarray, d: np.ndarray,
+             p: np.ndarray, width: int | None = None) -> np.ndarray:
+    """A function made by :func:`rows` over the broadcast batch shape of ``x, u, d, p`` (each
+    ``(..., n)``).
+
+    :param width: values written per row (default: the state size).
+    :return: shape ``(..., width)``.
+    """
+    shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], d.shape[:-1], p.shape[:-1])
+    out = np.empty((math.prod(shape), x.shape[-1] if width is None else width))
+    over_rows(_flat(x, shape), _flat(u, shape), _flat(d, shape),
+              _flat(p, ()) if p.ndim == 1 else _flat(p, shape), out)
+    return out.reshape(*shape, out.shape[1])
+
+
+def _flat(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``a`` broadcast to ``shape`` rows, as a writable C-contiguous float array of 2 axes (the
+    one layout compiled: read-only or strided arrays would each compile a variant)."""
+    if a.shape[:-1] != shape:
+        a = np.broadcast_to(a, (*shape, a.shape[-1]))
+    a = a.reshape(-1, a.shape[-1])
+    if a.dtype != np.float64 or not (a.flags.c_contiguous and a.flags.writeable):
+        a = np.array(a, dtype=np.float64, order="C")
+    return a

@@ -1,0 +1,240 @@
+"""The per-boat step kernel: a control period of every boat in one compiled call.
+
+apply (clip, scale, allocate) -> cost -> integrate -> limits -> sensors, boat by boat, the same
+code for one boat and for a batch. It does what :meth:`Simulator.apply`, :meth:`~Simulator.advance`
+and :meth:`~Simulator.measure` do in numpy, which stay the reference (and the path of what the
+kernel does not know: effects, user models without compiled equations, sensor chains of other
+stages). Python keeps the per-boat random streams (waves, current, wind, noise), which it refills
+a block at a time, and the info dict.
+
+What does not change from step to step (constants, the sensors' state arrays, the random streams'
+rows and cursors) is held in one :class:`KernelState`, so a step passes a handful of arrays: numba
+spends tens of nanoseconds on every argument of a call, which for a single environment would
+otherwise cost more than the physics.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from numba.core import types
+from numba.experimental import structref
+
+from ..blocks import BLOCK
+from ..compiled import jit
+from ..models import VehicleModel
+from ..sensors import CompiledChain, measure_chain
+
+#: The fields of a :class:`KernelState`: the dynamics, then the sensor chain's configuration and
+#: its state (:meth:`CompiledChain.configuration`, :meth:`CompiledChain.begin`).
+DYNAMICS = ("p", "h", "substeps", "mid", "scale", "allocation", "allocated", "weights",
+            "reference", "limited", "low", "high", "output_map", "steps", "streamed", "d_rows",
+            "d_cursor")
+CHAIN = ("bias", "wrap", "mu", "group", "zoom_settings", "limit", "period", "lag", "prob",
+         "noisy", "zooming", "holding", "delaying", "dropping",
+         "noise_rows", "noise_cursor", "zoom_mu", "count", "held", "buf", "head", "delay_fresh",
+         "dropout_rows", "dropout_cursor", "kept", "dropout_fresh")
+#: What the kernel returns: every boat stepped; stepped, and a random stream needs its next
+#: block (:meth:`~marine_envs.blocks.BlockStream.refill_exhausted`); an action was NaN or inf
+#: (nothing changed). Else the first boat whose state diverged.
+STEPPED, REFILL, BAD_ACTION = -1, -2, -3
+
+
+@structref.register
+class KernelStateType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class KernelState(structref.StructRefProxy):
+    """What a simulator's kernel reads every step and what it keeps from step to step (the
+    arrays are shared with the simulator and its sensor stages, not copied)."""
+
+    def __new__(cls, *fields: Any) -> KernelState:
+        return structref.StructRefProxy.__new__(cls, *fields)
+
+
+structref.define_proxy(KernelState, KernelStateType, DYNAMICS + CHAIN)
+
+
+@jit
+def exact_step(x, u, d, p, h, substeps, out, work):
+    """The exact (zero-order-hold) step of an affine model, ``out = [x u d] @ T + c``, with
+    ``p`` = ``T`` row by row, then ``c`` (:class:`~marine_envs.models.integrate.ExactStep`)."""
+    n_x, n_u, n_d = x.size, u.size, d.size
+    for i in range(n_x):
+        total = 0.0
+        for k in range(n_x):
+            total += x[k] * p[k * n_x + i]
+        for k in range(n_u):
+            total += u[k] * p[(n_x + k) * n_x + i]
+        for k in range(n_d):
+            total += d[k] * p[(n_x + n_u + k) * n_x + i]
+        out[i] = total + p[(n_x + n_u + n_d) * n_x + i]
+
+
+def step_kernel(integrate: Callable[..., None]) -> Callable[..., int]:
+    """The kernel ``step(state, actions, x, d, x_out, u_out, reward, failed, clipped, measure,
+    y, valid) -> int`` of a model stepped by ``integrate(x, u, d, p, h, substeps, out, work)``
+    (:func:`exact_step`, or :func:`marine_envs.compiled.rk4` of its equations).
+
+    Writes the disturbances (when they come from one block stream, ``state.streamed``; else
+    ``d`` holds them), the next states, the applied inputs, the rewards, the limit violations,
+    which boats' actions were clipped and, if ``measure``, the measurements and their valid
+    channels. Returns a code of :data:`STEPPED` ..., or the first boat whose state became NaN
+    or inf (then the sensors and the step counts are as they were).
+    """
+
+    @jit
+    def step(st, actions, x, d, x_out, u_out, reward, failed, clipped, measure, y, valid):
+        n_boats, n_x = x.shape
+        if not all_finite(actions):
+            return BAD_ACTION
+        refill = False
+        if st.streamed:  # each boat's current row of its stream
+            for b in range(n_boats):
+                d[b] = st.d_rows[st.d_cursor[b]]
+            refill = _advance(st.d_cursor)
+        n_a = actions.shape[1]
+        f = np.empty(n_a)
+        work = np.empty((3, n_x))
+        for b in range(n_boats):
+            # the actions in [-1, 1] command the actuators over their ranges
+            clip = False
+            for j in range(n_a):
+                a = actions[b, j]
+                if a > 1.0:
+                    a, clip = 1.0, True
+                elif a < -1.0:
+                    a, clip = -1.0, True
+                f[j] = st.mid[j] + st.scale[j] * a
+            clipped[b] = clip
+            for i in range(u_out.shape[1]):
+                if st.allocated:
+                    total = 0.0
+                    for j in range(n_a):
+                        total += f[j] * st.allocation[j, i]
+                    u_out[b, i] = total
+                else:
+                    u_out[b, i] = f[i]
+            reward[b] = _reward(st, x[b], u_out[b], d[b])
+            integrate(x[b], u_out[b], d[b], st.p, st.h, st.substeps, x_out[b], work)
+            for i in range(n_x):
+                if not np.isfinite(x_out[b, i]):
+                    return b
+        for b in range(n_boats):
+            exceeded = False
+            for k in range(st.limited.size):
+                value = x_out[b, st.limited[k]]
+                exceeded = exceeded or value < st.low[k] or value > st.high[k]
+            failed[b] = exceeded
+            st.steps[b] += 1
+        if measure:
+            refill = measure_boats(st, x_out, y, valid) or refill
+        return REFILL if refill else STEPPED
+
+    return step
+
+
+@jit
+def _advance(cursor):
+    """Move every boat's cursor of a block stream a row on; True when a boat used up its
+    block."""
+    exhausted = False
+    for b in range(cursor.size):
+        cursor[b] += 1
+        exhausted = exhausted or cursor[b] - b * BLOCK == BLOCK
+    return exhausted
+
+
+@jit
+def _reward(st, x, u, d):
+    """Minus the weighted squares of ``[x u d]`` about the reference (the task's cost)."""
+    w, ref = st.weights, st.reference
+    total = 0.0
+    for k in range(x.size):
+        total += (x[k] - ref[k]) * (x[k] - ref[k]) * w[k]
+    n = x.size
+    for k in range(u.size):
+        total += (u[k] - ref[n + k]) * (u[k] - ref[n + k]) * w[n + k]
+    n += u.size
+    for k in range(d.size):
+        total += (d[k] - ref[n + k]) * (d[k] - ref[n + k]) * w[n + k]
+    return total
+
+
+@jit
+def measure_boats(st, x, y, valid):
+    """The sensors' measurements ``y`` and valid channels of states ``x`` (every boat); True
+    when a sensor's random stream used up a boat's block."""
+    m = y.shape[1]
+    z = np.empty((x.shape[0], m))
+    for b in range(x.shape[0]):
+        for c in range(m):
+            total = 0.0
+            for k in range(x.shape[1]):
+                total += st.output_map[c, k] * x[b, k]
+            z[b, c] = total
+    measure_chain(z, st.bias, st.wrap, st.mu, st.group, st.zoom_settings, st.limit, st.period,
+                  st.lag, st.prob, st.noisy, st.zooming, st.holding, st.delaying, st.dropping,
+                  st.noise_rows, st.noise_cursor, st.zoom_mu, st.count, st.held, st.buf, st.head,
+                  st.delay_fresh, st.dropout_rows, st.dropout_cursor, st.kept, st.dropout_fresh,
+                  y, valid)
+    return _used_up(st.noise_cursor) or _used_up(st.dropout_cursor)
+
+
+@jit
+def _used_up(cursor):
+    """True when a boat's cursor reached the end of its block."""
+    for b in range(cursor.size):
+        if cursor[b] - b * BLOCK == BLOCK:
+            return True
+    return False
+
+@jit
+def all_finite(a):
+    """True when no entry of the 2-D array ``a`` is NaN or inf."""
+    for b in range(a.shape[0]):
+        for j in range(a.shape[1]):
+            if not np.isfinite(a[b, j]):
+                return False
+    return True
+
+
+def output_map(model: VehicleModel, measured: list[int]) -> np.ndarray | None:
+    """The matrix ``(channels, states)`` giving the measured outputs of a state, or None when
+    the model's outputs are not linear in its states."""
+    n_x = len(model.state_names)
+    C = model.output(np.eye(n_x))[:, measured].T.copy()
+    probe = np.random.default_rng(0).normal(size=(3, n_x))
+    linear = np.allclose(model.output(probe)[:, measured], probe @ C.T, rtol=1e-14, atol=0)
+    return np.ascontiguousarray(C) if linear else None
+
+
+#: The kernel of each model's equations (made once per process; compiled once per machine).
+_KERNELS: dict[Any, Callable[..., int]] = {}
+
+
+def kernel_for(model: VehicleModel, exact: bool) -> Callable[..., int] | None:
+    """The step kernel of ``model`` (exact step or RK4), or None when it has no compiled
+    equations."""
+    if exact:
+        key: Any = exact_step
+    elif type(model).equations is not None and type(model).rhs is VehicleModel.rhs:
+        key = type(model).equations.core
+    else:
+        return None
+    if key not in _KERNELS:
+        _KERNELS[key] = step_kernel(exact_step if exact else type(model).equations.rk4)
+    return _KERNELS[key]
+
+
+def chain_fields(chain: CompiledChain) -> tuple:
+    """The :data:`CHAIN` fields of a bound chain."""
+    return chain.configuration() + chain.begin()
+
+
+__all__ = ["BAD_ACTION", "REFILL", "STEPPED", "KernelState", "all_finite", "chain_fields",
+           "exact_step", "kernel_for", "measure_boats", "output_map", "step_kernel"]

@@ -1,0 +1,262 @@
+"""The compiled back end (marine_envs.compiled): each model's equations written once, the step
+kernel and the compiled sensor chain equal to their numpy references, and a disk cache that
+survives processes and follows edits across files."""
+
+import copy
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import marine_envs  # noqa: F401 - registers the environments
+from marine_envs import ENVIRONMENTS
+from marine_envs.models import get_model
+from marine_envs.sensors import (
+    CompiledChain,
+    GaussianNoise,
+    Saturation,
+    SensorSuite,
+    ZoomingQuantizer,
+)
+
+#: The numpy right-hand sides the compiled equations replaced, evaluated on random states,
+#: inputs and disturbances before they were removed (commit 58fb721).
+REFERENCE = np.load(Path(__file__).parent / "data" / "numpy_rhs_reference.npz")
+VARIANTS = {
+    "usv": ("usv", {}), "usv_angle": ("usv", {"wave_input": "angle"}),
+    "hydrofoil": ("hydrofoil", {}), "hydrofoil_added": ("hydrofoil", {"added_mass": True}),
+    "hydrofoil_helmbold": ("hydrofoil", {"lift_slope": "helmbold"}),
+    "rov": ("rov", {}), "rov_morph": ("rov", {}),
+    "rov_ground": ("rov", {"current_inertia": "ground"}),
+    "dp_vessel": ("dp_vessel", {}), "hovercraft": ("hovercraft", {}),
+    "hovercraft_beta": ("hovercraft", {"N_Hbeta": -3e5, "N_Avvv": 10.0, "X_Huv": -50.0}),
+    "nomoto": ("nomoto", {}),
+}
+
+
+def close(got, want, rtol=1e-12):
+    """Equal to ``rtol`` of each column's scale (a column of a batch may be near zero)."""
+    got, want = np.asarray(got), np.asarray(want)
+    assert got.shape == want.shape
+    scale = np.abs(want).max(axis=tuple(range(want.ndim - 1)), keepdims=True)
+    error = np.abs(got - want)
+    assert np.all(error <= rtol * scale), f"error {error.max():.3g} beyond {rtol} x scale"
+
+
+@pytest.mark.parametrize("case", list(VARIANTS))
+def test_compiled_equations_equal_the_numpy_ones_they_replaced(case):
+    name, params = VARIANTS[case]
+    model = get_model(name, **params)
+    x, u = REFERENCE[f"{case}/x"], REFERENCE[f"{case}/u"]
+    d = REFERENCE[f"{case}/d"] if f"{case}/d" in REFERENCE else None
+    close(model.rhs(x, u, d), REFERENCE[f"{case}/rhs"])
+    if f"{case}/calm" in REFERENCE:
+        close(model.rhs(x, u), REFERENCE[f"{case}/calm"])
+    close(model.u0, REFERENCE[f"{case}/u0"])
+    # finite differences amplify the last bits of rhs by 1/eps
+    for got, want in zip(model.linearize(), "ABE", strict=True):
+        close(got, REFERENCE[f"{case}/{want}"], rtol=1e-7)
+    for i in range(3):  # one boat, and a batch of one, are rows of the batch
+        close(model.rhs(x[i], u[i], None if d is None else d[i]), REFERENCE[f"{case}/rhs"][i])
+
+
+def test_per_row_parameters_and_replaced_parameters_equal_the_numpy_ones():
+    usv, x, u, d = get_model("usv"), REFERENCE["usv/x"], REFERENCE["usv/u"], REFERENCE["usv/d"]
+    wn, Tr = REFERENCE["usv_rows/wn"], REFERENCE["usv_rows/Tr"]
+    close(usv.with_rows(wn=wn, Tr=Tr).rhs(x, u, d), REFERENCE["usv_rows/rhs"])
+    close(usv.rhs_with(x, u, d, {"wn": wn, "zeta": 0.2}), REFERENCE["usv_rows/rhs_with"])
+    nomoto = get_model("nomoto")
+    rows = nomoto.with_rows(K=REFERENCE["nomoto_rows/K"], T=REFERENCE["nomoto_rows/T"])
+    close(rows.rhs(REFERENCE["nomoto/x"], REFERENCE["nomoto/u"], REFERENCE["nomoto/d"]),
+          REFERENCE["nomoto_rows/rhs"])
+    for case in ("hovercraft", "hovercraft_beta"):  # affine parameters, one rhs call each
+        name, params = VARIANTS[case]
+        model = get_model(name, **params)
+        x, u, d = (REFERENCE[f"{case}/{k}"] for k in "xud")
+        close(model.rhs_with(x, u, d, {"N_Hr": REFERENCE[f"{case}/N_Hr"], "C_R4": 1.8}),
+              REFERENCE[f"{case}/rhs_with"])
+
+
+@pytest.mark.parametrize("case", ["rov", "rov_morph", "rov_ground"])
+def test_rov_forces_regressors_and_parameter_jacobian_equal_the_numpy_ones(case):
+    name, params = VARIANTS[case]
+    model = get_model(name, **params)
+    x, u, d = (REFERENCE[f"{case}/{k}"] for k in "xud")
+    names = ["Xuu", "Nrr", "Zvp", "Yuv", "Xqq", "Mrp"]
+    theta = {n: REFERENCE[f"{case}/theta"][:, j] for j, n in enumerate(names)}
+    still = np.column_stack([np.zeros((len(x), 3)), d[:, 3]])
+    close(model.rhs(x, u, still), REFERENCE[f"{case}/still"])
+    close(model.forces(x, u, d), REFERENCE[f"{case}/forces"])
+    close(model.hydrodynamic_regressors(x, names, d), REFERENCE[f"{case}/regressors"])
+    close(model.rhs_with(x, u, d, theta), REFERENCE[f"{case}/rhs_with"])
+    close(model.parameter_jacobian(x, u, d, theta), REFERENCE[f"{case}/jacobian"])
+    close(model.trim_forces(1.2, 0.4), REFERENCE[f"{case}/trim_forces"])
+
+
+@pytest.mark.parametrize("case", ["hydrofoil", "hydrofoil_added", "hydrofoil_helmbold"])
+def test_the_hydrofoil_trim_is_the_numpy_one(case):
+    name, params = VARIANTS[case]
+    t = get_model(name, **params).trim
+    close(np.concatenate([t.alpha_s0, [t.F0], t.L, t.C_L, t.D, [t.f], t.h]),
+          REFERENCE[f"{case}/trim"])
+
+
+# -- the step kernel against the numpy path ------------------------------------------------------
+BUSY = {  # every stateful sensor stage, clipped actions, episodes that end
+    "marine_envs/USV-v0": {"dropout": {"psi": 0.2}, "delay": {"r": 2}, "sample_period": {"p": 3},
+                           "bias": {"phi": 0.01}, "max_roll": 0.05},
+    "marine_envs/Hydrofoil-v0": {"dropout": {"theta": 0.2}, "delay": {"xi": 2},
+                                 "sample_period": {"xi_dot": 3}, "sensor_range": {"xi": 1.5}},
+    "marine_envs/ROV-v0": {"dropout": {"z": 0.2}, "delay": {"psi": 1}, "morph_time": 2.0},
+    "marine_envs/DPVessel-v0": {"dropout": {"north": 0.3}, "delay": {"psi": 2},
+                                "sample_period": {"east": 2}},
+    "marine_envs/Hovercraft-v0": {"dropout": {"v": 0.2}, "sample_period": {"u": 2},
+                                  "quantization": {"r": 1e-3}},
+}
+
+
+def numpy_twin(env):
+    """The same vector env, run by apply/advance/measure in numpy."""
+    twin = copy.deepcopy(env)
+    twin.sim.run_in_numpy()
+    return twin
+
+
+@pytest.mark.parametrize("env_id", list(ENVIRONMENTS))
+def test_the_step_kernel_equals_the_numpy_path_over_episodes_and_resets(env_id):
+    env = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point",
+                       max_episode_steps=170, **BUSY[env_id])
+    assert env.sim.compiled
+    reference = numpy_twin(env)
+    assert not reference.sim.compiled
+    rng = np.random.default_rng(7)
+    results = [e.reset(seed=11) for e in (env, reference)]
+    np.testing.assert_array_equal(results[0][0], results[1][0])
+    ended = 0
+    for step in range(400):  # beyond a wave block (256 steps), with resets
+        action = rng.uniform(-1.3, 1.3, env.action_space.shape)  # some clipped
+        (obs, reward, term, trunc, info), (obs2, reward2, term2, trunc2, info2) = \
+            (e.step(action) for e in (env, reference))
+        close(info["state"], info2["state"])
+        close(reward[:, None], reward2[:, None])
+        np.testing.assert_allclose(obs, obs2, rtol=1e-6, atol=1e-9)  # float32 observations
+        for key in ("action_applied", "disturbance"):
+            np.testing.assert_allclose(info[key], info2[key], rtol=1e-12, atol=1e-300)
+        for key in ("action_clipped", "measurement_mask", "time"):
+            np.testing.assert_array_equal(info[key], info2[key], err_msg=f"{key} at {step}")
+        np.testing.assert_array_equal(term, term2)
+        np.testing.assert_array_equal(trunc, trunc2)
+        ended += int((term | trunc).sum())
+    assert ended >= 3  # resets were exercised
+
+
+def test_a_diverging_boat_is_named_and_the_step_not_taken():
+    env = gym.make_vec("marine_envs/Hydrofoil-v0", num_envs=3,
+                       vectorization_mode="vector_entry_point")
+    env.reset(seed=0)
+    sim = env.sim
+    sim.x = sim.x.copy()
+    sim.x[1, 2] = np.inf  # boat 1's heave rate
+    x, steps, noise = sim.x.copy(), sim.steps.copy(), sim._chain.noise.stream.cursor.copy()
+    with pytest.raises(FloatingPointError, match="boat 1"):
+        env.step(np.zeros((3, 2), dtype=np.float32))
+    np.testing.assert_array_equal(sim.x, x)
+    np.testing.assert_array_equal(sim.steps, steps)
+    np.testing.assert_array_equal(sim._chain.noise.stream.cursor, noise)  # sensors untouched
+
+
+def test_envs_with_effects_or_a_zigzag_law_run_in_numpy_and_the_others_compiled():
+    compiled = [gym.make(env_id).unwrapped.sim.compiled for env_id in ENVIRONMENTS]
+    assert all(compiled)
+    effects = [{"effect": "linear_damping", "target": "r", "parameters": {"c": -0.1}}]
+    assert not gym.make("marine_envs/USV-v0", effects=effects).unwrapped.sim.compiled
+    assert not gym.make("marine_envs/Hovercraft-v0", zigzag="20/20").unwrapped.sim.compiled
+
+
+# -- the compiled sensor chain against the numpy stages ------------------------------------------
+CHAINS = [dict(noise_std=0.1),
+          dict(noise_std={"a": 0.1}, quantization=0.05, wrap=("b",), sensor_range=2.0),
+          dict(bias=0.3, noise_std=0.2, sample_period={"a": 3, "c": 2}, delay={"b": 2, "c": 5},
+               dropout=0.3),
+          dict(noise_std=0.05, quantization={"a": 0.1, "c": 0.2}, quantizer="zooming"),
+          dict(dropout={"a": 0.5}, delay=1, sensor_range={"c": 1.0}), {}]
+
+
+def zoom_law_suite():
+    return SensorSuite(("a", "b", "c"), [
+        GaussianNoise([0.1, 0.1, 0.1]),
+        ZoomingQuantizer([[0, 2], [1]], law="zoom", levels=4, mu0=0.5), Saturation([3, 3, 3])])
+
+
+@pytest.mark.parametrize("make", [lambda kw=kw: SensorSuite.standard(("a", "b", "c"), **kw)
+                                  for kw in CHAINS] + [zoom_law_suite])
+def test_the_compiled_sensor_chain_equals_the_numpy_stages(make):
+    boats = 4
+    suite, twin = make(), make()
+    chain = CompiledChain.of(twin)
+    assert chain is not None
+    for s in (suite, twin):
+        s.bind(boats)
+        s.reset(np.arange(boats), [np.random.default_rng(i) for i in range(boats)])
+    chain.bind(boats)
+    rng = np.random.default_rng(99)
+    for k in range(600):
+        z = rng.normal(size=(boats, 3)) * (3 if k % 50 < 25 else 0.1)
+        if k % 97 == 50:  # boats restarting midway
+            idx = np.array([1, 3])
+            for s in (suite, twin):
+                s.reset(idx, [np.random.default_rng(1000 + k + i) for i in range(2)])
+        want = suite.measure(z.copy())
+        got, valid = chain.measure(z.copy())
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(valid, np.broadcast_to(suite.valid, got.shape))
+
+
+def test_a_chain_of_other_stages_or_order_is_not_compiled():
+    class Scale(GaussianNoise.__mro__[2]):  # a Stage of the user's own
+        def __call__(self, z):
+            return 2 * z
+
+    assert CompiledChain.of(SensorSuite(("a",), [Scale()])) is None
+    assert CompiledChain.of(SensorSuite(("a",), [Saturation([1.0]), GaussianNoise([0.1])])) \
+        is None
+
+
+# -- the disk cache --------------------------------------------------------------------------------
+def run_python(code: str, cwd: Path) -> str:
+    result = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=cwd,
+                            capture_output=True, text=True, timeout=300, check=True)
+    return result.stdout.strip()
+
+
+def test_the_cache_survives_processes_and_follows_an_edit_in_another_file(tmp_path):
+    (tmp_path / "equations.py").write_text(textwrap.dedent("""
+        from marine_envs.compiled import jit
+
+        @jit
+        def core(x, u, d, p, out):
+            out[0] = -p[0] * x[0] + u[0]
+        """))
+    (tmp_path / "kernels.py").write_text(textwrap.dedent("""
+        from marine_envs.compiled import rows
+        from equations import core
+
+        over_rows = rows(core)  # a closure over the equations, in another file
+        """))
+    probe = """
+        import numpy as np
+        from kernels import over_rows
+        out = np.empty((1, 1))
+        over_rows(np.ones((1, 1)), np.ones((1, 1)), np.zeros((1, 0)), np.full((1, 1), 2.0), out)
+        print(out[0, 0], sum(over_rows.stats.cache_hits.values()),
+              sum(over_rows.stats.cache_misses.values()))
+        """
+    assert run_python(probe, tmp_path) == "-1.0 0 1"  # compiled and saved
+    assert run_python(probe, tmp_path) == "-1.0 1 0"  # loaded: no compilation
+    equations = tmp_path / "equations.py"
+    equations.write_text(equations.read_text().replace("-p[0]", "-3 * p[0]"))
+    assert run_python(probe, tmp_path) == "-5.0 0 1"  # the edited equations, compiled anew
