@@ -8,7 +8,8 @@ signal never depends on what the other boats of the batch do.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from abc import ABC, abstractmethod
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -89,3 +90,46 @@ class BlockStream:
         """Count the steps until the first boat runs out anew (after compiled code moved the
         cursors, which keeps no count)."""
         self._countdown = BLOCK - int((self.cursor - self.first_row).max())
+
+
+class BlockSource(ABC):
+    """A per-boat signal made a block of steps at a time (a sea, a current, a wind, an event):
+    :meth:`blocks` makes a boat's next ``BLOCK`` steps from its state, :meth:`start` begins its
+    episode, and :attr:`stream` hands the rows out (to :meth:`step`, or straight to the
+    environments' compiled step kernel). Sources side by side are one source
+    (:class:`~marine_envs.sea.processes.Stacked`).
+
+    :param width: values per step and boat.
+    """
+
+    def __init__(self, width: int) -> None:
+        self.width = width
+        #: The rows, a block at a time per boat (read by the compiled step kernel too).
+        self.stream = BlockStream(width, self.blocks)
+
+    def bind(self, batch_size: int) -> None:
+        """Allocate state for ``batch_size`` boats."""
+        self.bind_state(batch_size)
+        self.stream.bind(batch_size)
+
+    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        """New episodes for boats ``idx`` (``rngs[i]`` is boat ``idx[i]``'s generator)."""
+        self.start(idx, rngs)
+        self.stream.restart(idx)
+
+    def step(self) -> NDArray[np.float64]:
+        """The current values of every boat (batch x width); then advance a step."""
+        return self.stream.next()
+
+    @abstractmethod
+    def bind_state(self, batch_size: int) -> None:
+        """Allocate the per-boat state :meth:`blocks` works from."""
+
+    @abstractmethod
+    def start(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+        """Begin the episodes of boats ``idx``: their state at time 0 (no block made yet)."""
+
+    @abstractmethod
+    def blocks(self, idx: NDArray[np.intp]) -> NDArray[np.float64]:
+        """The next ``BLOCK`` steps of boats ``idx`` (boats x BLOCK x width); advances their
+        state by a block."""

@@ -97,7 +97,7 @@ def _reach(func: Callable[..., Any], files: set[str], seen: set[int]):
                             f"{type(value).__name__}; only compiled functions and plain "
                             "constants can be cached")
     yield func.__code__.co_code, "|".join(constants)
-    for name in _names(func.__code__):
+    for name in sorted(_names(func.__code__)):  # a fixed order: set order changes per process
         value = func.__globals__.get(name)
         if isinstance(value, types.ModuleType):
             value = None
@@ -174,18 +174,19 @@ def rk4(core: RightHandSide) -> Callable[..., None]:
     def step(x, u, d, p, h, substeps, out, work):
         n = x.size
         k, total, z = work[0], work[1], work[2]
-        out[:] = x
+        for i in range(n):  # (loops, not slice copies: those compile numba's error messages)
+            out[i] = x[i]
         for _ in range(substeps):
-            z[:] = out
+            for i in range(n):
+                z[i] = out[i]
             for stage in range(4):
                 core(z, u, d, p, k)
-                if stage == 0:
-                    total[:] = k
-                elif stage == 3:
-                    for i in range(n):
+                for i in range(n):
+                    if stage == 0:
+                        total[i] = k[i]
+                    elif stage == 3:
                         total[i] += k[i]
-                else:
-                    for i in range(n):
+                    else:
                         total[i] += 2 * k[i]
                 if stage < 3:
                     ahead = 0.5 * h if stage < 2 else h

@@ -546,7 +546,7 @@ class CompiledChain:
         return y, valid
 
 
-@jit
+@jit(inline="never")  # once per measurement: compiled once, not into every caller
 def measure_chain(z, bias, wrap, mu, group, zoom_settings, limit, period, lag, prob,
                   noisy, zooming, holding, delaying, dropping,
                   noise_rows, noise_cursor, zoom_mu, count, held, buf, head, delay_fresh,
@@ -590,11 +590,12 @@ def measure_chain(z, bias, wrap, mu, group, zoom_settings, limit, period, lag, p
             noise_cursor[b] += 1
         if delaying:
             length = buf.shape[1]
-            if delay_fresh[b]:
-                for slot in range(length):
-                    buf[b, slot] = row
-                delay_fresh[b] = False
-            buf[b, head[0]] = row
+            for c in range(m):
+                if delay_fresh[b]:  # the line starts full of the first measurement
+                    for slot in range(length):
+                        buf[b, slot, c] = row[c]
+                buf[b, head[0], c] = row[c]
+            delay_fresh[b] = False
             for c in range(m):
                 row[c] = buf[b, (head[0] - lag[c]) % length, c]
         if dropping:

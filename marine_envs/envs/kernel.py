@@ -95,7 +95,8 @@ def step_kernel(integrate: Callable[..., None]) -> Callable[..., int]:
         refill = False
         if st.streamed:  # each boat's current row of its stream
             for b in range(n_boats):
-                d[b] = st.d_rows[st.d_cursor[b]]
+                for j in range(d.shape[1]):
+                    d[b, j] = st.d_rows[st.d_cursor[b], j]
             refill = _advance(st.d_cursor)
         n_a = actions.shape[1]
         f = np.empty(n_a)
@@ -138,7 +139,7 @@ def step_kernel(integrate: Callable[..., None]) -> Callable[..., int]:
     return step
 
 
-@jit
+@jit(inline="never")  # once per step: compiled once, not into every caller
 def _advance(cursor):
     """Move every boat's cursor of a block stream a row on; True when a boat used up its
     block."""
@@ -165,7 +166,7 @@ def _reward(st, x, u, d):
     return total
 
 
-@jit
+@jit(inline="never")  # once per step: compiled once, not into every caller
 def measure_boats(st, x, y, valid):
     """The sensors' measurements ``y`` and valid channels of states ``x`` (every boat); True
     when a sensor's random stream used up a boat's block."""
@@ -193,7 +194,7 @@ def _used_up(cursor):
             return True
     return False
 
-@jit
+@jit(inline="never")  # once per step: compiled once, not into every caller
 def all_finite(a):
     """True when no entry of the 2-D array ``a`` is NaN or inf."""
     for b in range(a.shape[0]):

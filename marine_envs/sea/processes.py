@@ -16,7 +16,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..blocks import BLOCK, BlockStream
+from ..blocks import BLOCK, BlockSource
 
 FloatArray = NDArray[np.float64]
 
@@ -39,7 +39,7 @@ def _channels(name: str, value: ArrayLike, width: int | None = None) -> FloatArr
     return np.broadcast_to(arr, (width or arr.size,)).copy()
 
 
-class GaussMarkov:
+class GaussMarkov(BlockSource):
     """First-order Gauss-Markov processes, one per channel: ``x_dot = -(x - mean)/T + noise``.
 
     Sampled exactly at the control period, so ``x_{k+1} = mean + a (x_k - mean) + std sqrt(1-a^2)
@@ -68,26 +68,19 @@ class GaussMarkov:
         with np.errstate(divide="ignore"):
             self.a = np.exp(-dt / tau)
         self.gain = self.std * np.sqrt(1 - self.a**2)
-        self.width = width
-        #: The rows, a block at a time per boat (read by the compiled step kernel too).
-        self.stream = BlockStream(width, self._fill)
+        super().__init__(width)
 
-    def bind(self, batch_size: int) -> None:
-        self.stream.bind(batch_size)
+    def bind_state(self, batch_size: int) -> None:
         self._rngs: list[np.random.Generator] = [np.random.default_rng(0)] * batch_size
         self._last = np.zeros((batch_size, self.width))
         self._start = np.ones(batch_size, dtype=bool)
 
-    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+    def start(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         for i, rng in zip(idx, rngs, strict=True):
             self._rngs[i] = rng
         self._start[idx] = True
-        self.stream.restart(idx)
 
-    def step(self) -> FloatArray:
-        return self.stream.next()
-
-    def _fill(self, idx: NDArray[np.intp]) -> FloatArray:
+    def blocks(self, idx: NDArray[np.intp]) -> FloatArray:
         noise = np.stack([self._rngs[i].standard_normal((BLOCK, self.width)) for i in idx])
         # a new episode starts in the stationary distribution; a refill continues the last value
         starting = self._start[idx, None]
@@ -106,7 +99,7 @@ class GaussMarkov:
         return block + self.mean
 
 
-class StepEvent:
+class StepEvent(BlockSource):
     """Channels that jump from ``before`` to ``after`` once per episode, at a given time or at a
     time drawn uniformly from ``window`` (e.g. the ROV's morph command).
 
@@ -131,43 +124,46 @@ class StepEvent:
             raise ValueError(f"window={window!r} is invalid: (earliest, latest) with "
                              "0 <= earliest <= latest s")
         self.time, self.window, self.dt = time, window, dt
+        super().__init__(self.width)
 
-    def bind(self, batch_size: int) -> None:
+    def bind_state(self, batch_size: int) -> None:
         self._switch_step = np.zeros(batch_size, dtype=np.int64)
-        self._step = np.zeros(batch_size, dtype=np.int64)
-        self._one = np.ones(1, dtype=np.int64)
+        self._step = np.zeros(batch_size, dtype=np.int64)  # at the start of the next block
 
-    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+    def start(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         for i, rng in zip(idx, rngs, strict=True):
             t = self.time if self.window is None else rng.uniform(*self.window)
             self._switch_step[i] = math.ceil(t / self.dt - 1e-9)
         self._step[idx] = 0
 
-    def step(self) -> FloatArray:
-        switched = self._step >= self._switch_step
-        self._step = self._step + self._one
-        return np.where(switched[:, None], self.after, self.before)
+    def blocks(self, idx: NDArray[np.intp]) -> FloatArray:
+        steps = self._step[idx, None] + np.arange(BLOCK)  # (boats, BLOCK)
+        self._step[idx] += BLOCK
+        switched = steps >= self._switch_step[idx, None]
+        return np.where(switched[:, :, None], self.after, self.before)
 
     def switch_time(self) -> FloatArray:
         """Each boat's switching time this episode, s (on the step grid)."""
         return self._switch_step * self.dt
 
 
-class Stacked:
-    """Several sources side by side: their columns concatenated in the order given."""
+class Stacked(BlockSource):
+    """Several sources side by side: their columns concatenated in the order given, in one
+    stream (each source's own stream stays unbound)."""
 
-    def __init__(self, *sources: DisturbanceSource) -> None:
+    def __init__(self, *sources: BlockSource) -> None:
         if not sources:
             raise ValueError("Stacked needs at least one source")
         self.sources = sources
+        super().__init__(sum(source.width for source in sources))
 
-    def bind(self, batch_size: int) -> None:
+    def bind_state(self, batch_size: int) -> None:
         for source in self.sources:
-            source.bind(batch_size)
+            source.bind_state(batch_size)
 
-    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+    def start(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         for source in self.sources:
-            source.reset(idx, rngs)
+            source.start(idx, rngs)
 
-    def step(self) -> FloatArray:
-        return np.concatenate([source.step() for source in self.sources], axis=1)
+    def blocks(self, idx: NDArray[np.intp]) -> FloatArray:
+        return np.concatenate([source.blocks(idx) for source in self.sources], axis=2)

@@ -41,7 +41,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..blocks import BLOCK, BlockStream
+from ..blocks import BLOCK, BlockSource
 from ..compiled import jit
 from .spectra import MeasuredSpectrum, jonswap, pierson_moskowitz
 
@@ -198,7 +198,7 @@ def energy_band(sea: SeaState, fraction: float = 0.998) -> tuple[float, float]:
     return min(lows), max(highs)
 
 
-class WaveRealisation:
+class WaveRealisation(BlockSource):
     """Batched, seedable wave disturbance at a moving vessel (see the module docstring).
 
     :param sea: the sea state.
@@ -234,10 +234,9 @@ class WaveRealisation:
         self._rotations = np.exp(1j * np.outer(self._step_times, self.omega_e))  # (BLOCK, n)
         self._cos_sin = np.hstack([self._rotations.real, self._rotations.imag])
         self._block_rotation = np.exp(1j * self.omega_e * BLOCK * dt)
-        #: The rows, a block at a time per boat (read by the compiled step kernel too).
-        self.stream = BlockStream(0, self._blocks)
         response = np.asarray(coupling(self.omega), dtype=complex)
-        self.n_channels = self.stream.width = response.shape[1]
+        self.n_channels = response.shape[1]
+        super().__init__(self.n_channels)
         self._hs_grid: NDArray[np.float64] | None = None
         self._shaped_cache: dict[float, NDArray[np.float64]] = {}
         if sea.varying and sea.shape_follows_hs:
@@ -257,25 +256,18 @@ class WaveRealisation:
         return np.sqrt(2 * np.diff(energy))
 
     # -- batched state ---------------------------------------------------------------------------
-    def bind(self, batch_size: int) -> None:
-        """Allocate state for ``batch_size`` boats."""
+    def bind_state(self, batch_size: int) -> None:
         #: each boat's phasors exp(i(omega_e t + eps)) and time t (s) at the start of its next block
         self.phasor = np.ones((batch_size, self.omega.size), dtype=complex)
         self.block_time = np.zeros(batch_size)
-        self.stream.bind(batch_size)
 
-    def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
+    def start(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         """New random phases for boats ``idx`` from their generators; their time restarts at 0."""
         for i, rng in zip(idx, rngs, strict=True):
             self.phasor[i] = np.exp(1j * rng.uniform(0.0, 2 * math.pi, self.omega.size))
         self.block_time[idx] = 0.0
-        self.stream.restart(idx)
 
-    def step(self) -> NDArray[np.float64]:
-        """Disturbance (batch x channels) at the current time; then advance by ``dt``."""
-        return self.stream.next()
-
-    def _blocks(self, idx: NDArray[np.intp]) -> NDArray[np.float64]:
+    def blocks(self, idx: NDArray[np.intp]) -> NDArray[np.float64]:
         """The next ``BLOCK`` steps of boats ``idx`` (boats x BLOCK x channels)."""
         k, n, c = idx.size, self.omega.size, self.n_channels
         times = self.block_time[idx, None] + self._step_times  # (k, BLOCK)
