@@ -181,12 +181,14 @@ def rk4(core: RightHandSide) -> Callable[..., None]:
                 z[i] = out[i]
             for stage in range(4):
                 core(z, u, d, p, k)
-                for i in range(n):
-                    if stage == 0:
+                if stage == 0:  # (branches outside the loops: simple loops vectorise)
+                    for i in range(n):
                         total[i] = k[i]
-                    elif stage == 3:
+                elif stage == 3:
+                    for i in range(n):
                         total[i] += k[i]
-                    else:
+                else:
+                    for i in range(n):
                         total[i] += 2 * k[i]
                 if stage < 3:
                     ahead = 0.5 * h if stage < 2 else h

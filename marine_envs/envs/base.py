@@ -118,7 +118,8 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
                 "action_clipped": bool(sim.clipped[0]),
                 # without a sea the simulator never replaces d: a copy, not a shared view
                 "disturbance": sim.d[0] if sim.disturbances is not None else sim.d[0].copy(),
-                "measurement_mask": sim.valid[0].copy(),
+                # a new array each step (or the read-only all-valid one): a view is safe
+                "measurement_mask": sim.valid[0],
                 "time": float(sim.steps[0]) * sim.dt}
 
     def render(self):

@@ -29,6 +29,7 @@ from .kernel import (
     chain_fields,
     kernel_for,
     measure_boats,
+    new_state,
     output_map,
 )
 
@@ -258,6 +259,8 @@ class Simulator:
             self.disturbances.bind(batch_size)
         if self.actuators is not None:
             self.actuators.bind(batch_size)
+        self._measured_shape = (batch_size, len(self.sensors.channels))
+        self._streamed = self._disturbance_stream is not None  # the kernel reads it
         self._kernel, self._chain = self._compiled_kernel(), None
         if self._kernel is not None:
             self._chain = CompiledChain(self.sensors)
@@ -291,7 +294,7 @@ class Simulator:
         allocated = self._allocation is not None
         n_in = self._weights.size
         stream = self._disturbance_stream
-        return KernelState(
+        return new_state(
             np.ascontiguousarray(p, dtype=float), float(h), int(substeps),
             self.u_mid[0].copy(), self.u_scale[0].copy(),
             self._allocation if allocated else np.zeros((1, 1)), allocated,
@@ -348,14 +351,14 @@ class Simulator:
         a = self._actions(action)
         d = self.d
         if self.disturbances is not None:
-            if self._disturbance_stream is not None:
-                d = np.empty_like(self.d)  # the kernel reads the stream
+            if self._streamed:
+                d = np.empty(self.d.shape)  # the kernel reads the stream
             elif all_finite(a):  # (else the kernel refuses the action: keep the stream)
                 d = self.disturbances.step()
         n = self.batch_size
-        x, u = np.empty_like(self.x), np.empty_like(self.u)
+        x, u = np.empty(self.x.shape), np.empty(self.u.shape)  # (empty_like costs 3x more)
         reward, failed, clipped = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
-        y = np.empty((n, len(self.sensors.channels)) if measure else (0, 0))
+        y = np.empty(self._measured_shape if measure else (0, 0))
         valid = np.empty(y.shape, dtype=bool)
         status = self._kernel(self._state, a, self.x, d, x, u, reward, failed, clipped, measure,
                               y, valid)
@@ -450,14 +453,13 @@ class Simulator:
 
     def _actions(self, action: ArrayLike) -> FloatArray:
         """``action`` as a float array (batch x actuators). :raises ValueError: a wrong shape."""
-        a = np.asarray(action)
-        shape = (self.batch_size, self.n_actions)
-        if a.size != shape[0] * shape[1] or a.dtype.kind not in "fiub":
+        a = action if isinstance(action, np.ndarray) else np.asarray(action)
+        if a.size != self.batch_size * self.n_actions or a.dtype.kind not in "fiub":
             raise ValueError(f"action has shape {a.shape} and dtype {a.dtype}; expected "
                              f"{self.n_actions} number(s) per environment for "
                              f"{self.batch_size} environment(s)")
-        # one conversion up front: mixed float32/float64 arithmetic is slower
-        return np.ascontiguousarray(a.reshape(shape), dtype=np.float64)
+        # one conversion up front (a fresh C array: the one layout the kernel is compiled for)
+        return a.astype(np.float64, order="C").reshape(self.batch_size, self.n_actions)
 
     def nominal_action(self) -> FloatArray:
         """The normalised action that applies the model's nominal input ``u0`` (for thrusters:
@@ -486,7 +488,7 @@ class Simulator:
     def measure(self) -> FloatArray:
         """Sensor outputs (batch x channels) of the current states."""
         if self._chain is not None:
-            y = np.empty((self.batch_size, len(self.sensors.channels)))
+            y = np.empty(self._measured_shape)
             valid = np.empty(y.shape, dtype=bool)
             if measure_boats(self._state, np.ascontiguousarray(self.x, dtype=float), y, valid):
                 self._refill_streams()

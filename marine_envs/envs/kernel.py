@@ -59,6 +59,14 @@ class KernelState(structref.StructRefProxy):
 structref.define_proxy(KernelState, KernelStateType, DYNAMICS + CHAIN)
 
 
+@jit(inline="never")
+def new_state(*fields):
+    """A :class:`KernelState` of ``fields`` (in the order of :data:`DYNAMICS` and :data:`CHAIN`),
+    made by compiled code that is cached (numba compiles the proxy's own constructor anew in
+    every process)."""
+    return KernelState(*fields)
+
+
 @jit
 def exact_step(x, u, d, p, h, substeps, out, work):
     """The exact (zero-order-hold) step of an affine model, ``out = [x u d] @ T + c``, with
@@ -238,4 +246,4 @@ def chain_fields(chain: CompiledChain) -> tuple:
 
 
 __all__ = ["BAD_ACTION", "REFILL", "STEPPED", "KernelState", "all_finite", "chain_fields",
-           "exact_step", "kernel_for", "measure_boats", "output_map", "step_kernel"]
+           "exact_step", "kernel_for", "measure_boats", "new_state", "output_map", "step_kernel"]

@@ -1,10 +1,12 @@
 """Time integration of the models, written once: classical RK4 with sub-steps, and the exact
 step of an affine model.
 
-:func:`rk4` is the one Runge-Kutta step of the project: the environments' simulator
-(:class:`RK4Step`), the manoeuvres, the identification, the filters' predictions, the synthetic
-recordings and the diagnosis all integrate with it, so a model means the same trajectory
-everywhere. :class:`ExactStep` is the zero-order-hold step of a linear (affine) model.
+:func:`rk4` is the Runge-Kutta step of any numpy right-hand side: the manoeuvres, the
+identification, the filters' predictions, the synthetic recordings, the diagnosis and the
+environments' numpy path (:class:`RK4Step`) integrate with it. The environments' compiled step
+kernel integrates a model's compiled equations with :func:`marine_envs.compiled.rk4`, the same
+arithmetic in the same order (tested equal), so a model means the same trajectory everywhere.
+:class:`ExactStep` is the zero-order-hold step of a linear (affine) model.
 """
 
 from __future__ import annotations

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..blocks import BLOCK, BlockSource
+from ..compiled import jit
 
 FloatArray = NDArray[np.float64]
 
@@ -89,14 +90,24 @@ class GaussMarkov(BlockSource):
         noise[:, 0] = np.where(starting, 0.0, noise[:, 0])
         decay = self.a ** np.arange(BLOCK)[:, None]  # a**0 = 1 also for white noise (a = 0)
         block = first[:, None, :] * decay
-        import scipy.signal  # here, not at the top: importing it costs a third of a second
-
-        for c in range(self.width):  # each channel has its own filter coefficient
-            filtered, _ = scipy.signal.lfilter([self.gain[c]], [1.0, -self.a[c]], noise[:, :, c],
-                                               axis=1, zi=self.a[c] * previous[:, c:c + 1])
-            block[:, :, c] += filtered
+        _add_filtered(noise, self.gain, self.a, previous, block)
         self._last[idx], self._start[idx] = block[:, -1], False
         return block + self.mean
+
+
+@jit
+def _add_filtered(noise, gain, a, previous, out):
+    """``out += y`` with ``y_t = gain x_t + a y_{t-1}`` along axis 1 of ``noise`` (boats x steps x
+    channels), each boat's recursion starting from ``previous``: the exact AR(1) sampling of
+    :class:`GaussMarkov` (what ``scipy.signal.lfilter([gain], [1, -a])`` computes)."""
+    boats, steps, width = noise.shape
+    for b in range(boats):
+        for c in range(width):
+            y = a[c] * previous[b, c]
+            for t in range(steps):
+                y = gain[c] * noise[b, t, c] + y
+                out[b, t, c] += y
+                y = a[c] * y
 
 
 class StepEvent(BlockSource):
