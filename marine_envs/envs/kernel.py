@@ -72,15 +72,21 @@ def exact_step(x, u, d, p, h, substeps, out, work):
     """The exact (zero-order-hold) step of an affine model, ``out = [x u d] @ T + c``, with
     ``p`` = ``T`` row by row, then ``c`` (:class:`~marine_envs.models.integrate.ExactStep`)."""
     n_x, n_u, n_d = x.size, u.size, d.size
+    # the sums run side by side over the outputs (independent: in parallel), each in the order
+    # of [x u d], then the offset
     for i in range(n_x):
-        total = 0.0
-        for k in range(n_x):
-            total += x[k] * p[k * n_x + i]
-        for k in range(n_u):
-            total += u[k] * p[(n_x + k) * n_x + i]
-        for k in range(n_d):
-            total += d[k] * p[(n_x + n_u + k) * n_x + i]
-        out[i] = total + p[(n_x + n_u + n_d) * n_x + i]
+        out[i] = 0.0
+    for k in range(n_x):
+        for i in range(n_x):
+            out[i] += x[k] * p[k * n_x + i]
+    for k in range(n_u):
+        for i in range(n_x):
+            out[i] += u[k] * p[(n_x + k) * n_x + i]
+    for k in range(n_d):
+        for i in range(n_x):
+            out[i] += d[k] * p[(n_x + n_u + k) * n_x + i]
+    for i in range(n_x):
+        out[i] += p[(n_x + n_u + n_d) * n_x + i]
 
 
 def step_kernel(integrate: Callable[..., None]) -> Callable[..., int]:

@@ -214,8 +214,8 @@ def _clip(alpha, stall):
 @jit
 def hydrofoil_rhs(x, u, d, p, out):
     """One craft's ``x_dot`` (docs/models.md 2.3); ``p`` packed by :meth:`HydrofoilModel.pack`."""
-    forces = hydrofoil_forces(x, u, d, p, p[THRUST])
-    heave, pitch = forces[HEAVE], forces[PITCH]
+    # unpacked: indexing the tuple by a named constant costs as much as the forces
+    heave, pitch, _, _, _, _, _, _, _, _, _ = hydrofoil_forces(x, u, d, p, p[THRUST])
     out[0], out[1] = x[2], x[3]
     if p[ADDED_MASS] != 0.0:
         i = INV_MASS
