@@ -3,6 +3,7 @@ kernel and the compiled sensor chain equal to their numpy references, and a disk
 survives processes and follows edits across files."""
 
 import copy
+import os
 import subprocess
 import sys
 import textwrap
@@ -228,7 +229,9 @@ def test_a_chain_of_other_stages_or_order_is_not_compiled():
 
 # -- the disk cache --------------------------------------------------------------------------------
 def run_python(code: str, cwd: Path) -> str:
-    result = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=cwd,
+    """``code``'s output in a new process whose numba cache is a folder of ``cwd``."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cwd / "cache"))
+    result = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=cwd, env=env,
                             capture_output=True, text=True, timeout=300, check=True)
     return result.stdout.strip()
 
