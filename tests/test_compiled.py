@@ -162,12 +162,12 @@ def test_a_diverging_boat_is_named_and_the_step_not_taken():
     sim = env.sim
     sim.x = sim.x.copy()
     sim.x[1, 2] = np.inf  # boat 1's heave rate
-    x, steps, noise = sim.x.copy(), sim.steps.copy(), sim._chain.noise.stream.cursor.copy()
+    x, steps, noise = sim.x.copy(), sim.steps.copy(), sim._compiled.chain.noise.stream.cursor.copy()
     with pytest.raises(FloatingPointError, match="boat 1"):
         env.step(np.zeros((3, 2), dtype=np.float32))
     np.testing.assert_array_equal(sim.x, x)
     np.testing.assert_array_equal(sim.steps, steps)
-    np.testing.assert_array_equal(sim._chain.noise.stream.cursor, noise)  # sensors untouched
+    np.testing.assert_array_equal(sim._compiled.chain.noise.stream.cursor, noise)  # sensors untouched
 
 
 def test_envs_with_effects_or_a_zigzag_law_run_in_numpy_and_the_others_compiled():

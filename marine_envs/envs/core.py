@@ -20,18 +20,8 @@ from ..models import VehicleModel
 from ..models.effects import BatchActuators, Effect, ModelWithEffects
 from ..models.integrate import ExactStep, RK4Step
 from ..sea.processes import DisturbanceSource
-from ..sensors import CompiledChain, SensorSuite, as_index, per_channel
-from .kernel import (
-    BAD_ACTION,
-    REFILL,
-    KernelState,
-    all_finite,
-    chain_fields,
-    kernel_for,
-    measure_boats,
-    new_state,
-    output_map,
-)
+from ..sensors import SensorSuite, as_index, per_channel
+from .kernel import CompiledStep
 
 FloatArray = NDArray[np.float64]
 
@@ -159,11 +149,11 @@ class Actuation:
 class Simulator:
     """Steps a batch of boats: disturbances -> dynamics -> cost -> sensors.
 
-    :meth:`step` runs a control period of every boat in one compiled call (the kernel of
-    :mod:`marine_envs.envs.kernel`) when the model has compiled equations (or is stepped exactly)
-    and the sensors are the standard chain; else, and always through :meth:`apply`,
-    :meth:`advance` and :meth:`measure`, it runs in numpy (effects, a zig-zag rudder law, user
-    models). Both give the same numbers.
+    :meth:`step` runs a control period of every boat in one compiled call
+    (:class:`~marine_envs.envs.kernel.CompiledStep`) when the model has compiled equations (or
+    is stepped exactly) and the sensors are the standard chain; else, and always through
+    :meth:`apply`, :meth:`advance` and :meth:`measure`, in numpy (effects, a zig-zag rudder
+    law, user models). Both give the same numbers.
 
     :param model: the vehicle model.
     :param sensors: the sensor chain over some of the model's states (by name).
@@ -259,81 +249,20 @@ class Simulator:
             self.disturbances.bind(batch_size)
         if self.actuators is not None:
             self.actuators.bind(batch_size)
-        self._measured_shape = (batch_size, len(self.sensors.channels))
-        self._streamed = self._disturbance_stream is not None  # the kernel reads it
-        self._kernel, self._chain = self._compiled_kernel(), None
-        if self._kernel is not None:
-            self._chain = CompiledChain(self.sensors)
-            self._chain.bind(batch_size)
-            self._state = self._kernel_state()
-
-    # -- the compiled path -------------------------------------------------------------------------
-    def _compiled_kernel(self):
-        """The step kernel of this simulator, or None when it runs in numpy."""
-        numpy_steps = (type(self).apply, type(self).advance, type(self).measure) != \
-            (Simulator.apply, Simulator.advance, Simulator.measure)
-        if numpy_steps or self.effects or CompiledChain.of(self.sensors) is None:
-            return None
-        exact = isinstance(self.integrate, ExactStep)
-        if not exact and np.ndim(self.model.constants) != 1:
-            return None  # parameters per boat
-        measured = [self.model.output_names.index(c) for c in self.sensors.channels]
-        self._output_map = output_map(self.model, measured)
-        return None if self._output_map is None else kernel_for(self.model, exact)
-
-    def _kernel_state(self) -> KernelState:
-        """What the kernel keeps: constants, step counts, the sensor chain's arrays."""
-        if isinstance(self.integrate, ExactStep):
-            offset = self.integrate.offset
-            n_x = len(self.model.state_names)
-            p = np.concatenate([self.integrate.transition.ravel(),
-                                np.zeros(n_x) if offset is None else offset])
-            h, substeps = self.dt, 1
-        else:
-            p, h, substeps = self.model.constants, self.integrate.h, self.integrate.substeps
-        allocated = self._allocation is not None
-        n_in = self._weights.size
-        stream = self._disturbance_stream
-        return new_state(
-            np.ascontiguousarray(p, dtype=float), float(h), int(substeps),
-            self.u_mid[0].copy(), self.u_scale[0].copy(),
-            self._allocation if allocated else np.zeros((1, 1)), allocated,
-            self._weights.copy(), np.zeros(n_in) if self._reference is None else self._reference,
-            self._limited_list.astype(np.int64), self._low[0].copy(), self._high[0].copy(),
-            self._output_map, self.steps, stream is not None,
-            stream.rows if stream is not None else np.zeros((1, 1)),
-            stream.cursor if stream is not None else np.zeros(1, dtype=np.int64),
-            *chain_fields(self._chain))
+        self._compiled = CompiledStep.of(self)
 
     @property
     def compiled(self) -> bool:
         """True when :meth:`step` runs the compiled kernel (else numpy)."""
-        return self._kernel is not None
+        return self._compiled is not None
 
     def run_in_numpy(self) -> None:
         """Step every boat through :meth:`apply`, :meth:`advance` and :meth:`measure` in numpy
         from now on (the reference the kernel is tested against; slower)."""
-        if self._kernel is not None:
-            for stream in self._streams():
-                stream.recount()
-        self._kernel = self._chain = None
-
-    @property
-    def _disturbance_stream(self):
-        """The block stream the disturbances come from when they are one (the kernel reads it),
-        else None (they are stepped in Python)."""
-        return getattr(self.disturbances, "stream", None)
-
-    def _streams(self) -> list:
-        """The block streams the kernel reads: sensor noise, dropout, disturbances."""
-        streams = [getattr(self._chain.noise, "stream", None),
-                   getattr(self._chain.dropout, "stream", None), self._disturbance_stream]
-        return [s for s in streams if s is not None]
-
-    def _refill_streams(self) -> None:
-        """Refill the random streams whose blocks the kernel used up."""
-        for stream in self._streams():
-            stream.refill_exhausted()
+        if self._compiled is not None:
+            for stream in self._compiled.streams():
+                stream.recount()  # the kernel moves the cursors without counting
+        self._compiled = None
 
     def step(self, action: ArrayLike, measure: bool = True
              ) -> tuple[FloatArray | None, FloatArray, NDArray[np.bool_]]:
@@ -344,66 +273,42 @@ class Simulator:
         :raises ValueError: NaN or inf in the action, or a wrong shape (nothing changed).
         :raises FloatingPointError: a boat's state became NaN or inf.
         """
-        if self._kernel is None:
-            self.apply(action)
-            reward, failed = self.advance()
-            return (self.measure() if measure else None), reward, failed
-        a = self._actions(action)
-        d = self.d
-        if self.disturbances is not None:
-            if self._streamed:
-                d = np.empty(self.d.shape)  # the kernel reads the stream
-            elif all_finite(a):  # (else the kernel refuses the action: keep the stream)
-                d = self.disturbances.step()
-        n = self.batch_size
-        x, u = np.empty(self.x.shape), np.empty(self.u.shape)  # (empty_like costs 3x more)
-        reward, failed, clipped = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
-        y = np.empty(self._measured_shape if measure else (0, 0))
-        valid = np.empty(y.shape, dtype=bool)
-        status = self._kernel(self._state, a, self.x, d, x, u, reward, failed, clipped, measure,
-                              y, valid)
-        if status == BAD_ACTION:
-            raise ValueError(f"action contains NaN or inf: {a.tolist()!r}")
-        self.d = d
-        if status >= 0:
-            raise FloatingPointError(f"simulation diverged: non-finite state {x[status]} of "
-                                     f"boat {status} (a parameter or time step out of range?)")
-        self.x, self.u, self.clipped = x, u, clipped
-        if status == REFILL:
-            self._refill_streams()
-        if measure:
-            self._chain.valid = valid
-        return (y if measure else None), reward, failed
+        if self._compiled is not None:
+            return self._compiled.step(self, action, measure)
+        self.apply(action)
+        reward, failed = self.advance()
+        return (self.measure() if measure else None), reward, failed
 
     def measure_detached(self) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Measurements and valid channels of every boat from a copy of the sensors, whose own
         state does not advance (for restarting some boats between steps)."""
-        saved = self.sensors, self._chain, getattr(self, "_state", None)
+        saved = self.sensors, self._compiled
         self.sensors = copy.deepcopy(self.sensors)
-        if self._chain is not None:
-            self._chain = CompiledChain(self.sensors)
-            self._chain.bind(self.batch_size)
-            self._state = self._kernel_state()
+        if self._compiled is not None:
+            self._compiled = CompiledStep.of(self)
         try:
             return self.measure(), self.valid
         finally:
-            self.sensors, self._chain, self._state = saved
+            self.sensors, self._compiled = saved
 
     @property
     def valid(self) -> NDArray[np.bool_]:
         """Which channels carried a fresh sample at the last measurement (False = held)."""
-        return self._chain.valid if self._chain is not None else self.sensors.valid
+        compiled = self._compiled
+        return compiled.chain.valid if compiled is not None else self.sensors.valid
 
     def __getstate__(self) -> dict:
-        # the kernel's state holds compiled objects: rebuilt on unpickling (and deep copies)
+        # the compiled path holds compiled objects: rebuilt on unpickling (and in deep copies)
         state = self.__dict__.copy()
-        state.pop("_state", None)
+        state["_compiled"] = state.get("_compiled") is not None
         return state
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)
-        if self.__dict__.get("_kernel") is not None:
-            self._state = self._kernel_state()
+        if self._compiled:
+            self._compiled = CompiledStep.of(self)
+        else:
+            self._compiled = None
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator],
               x0: ArrayLike | None = None) -> None:
@@ -487,13 +392,8 @@ class Simulator:
 
     def measure(self) -> FloatArray:
         """Sensor outputs (batch x channels) of the current states."""
-        if self._chain is not None:
-            y = np.empty(self._measured_shape)
-            valid = np.empty(y.shape, dtype=bool)
-            if measure_boats(self._state, np.ascontiguousarray(self.x, dtype=float), y, valid):
-                self._refill_streams()
-            self._chain.valid = valid
-            return y
+        if self._compiled is not None:
+            return self._compiled.measure(self.x)
         outputs = self.x if self._outputs_are_states else self.model.output(self.x)
         true = outputs[:, self.measured]
         if self.effects:

@@ -25,6 +25,7 @@ from numba.experimental import structref
 from ..blocks import BLOCK
 from ..compiled import jit
 from ..models import VehicleModel
+from ..models.integrate import ExactStep
 from ..sensors import CompiledChain, measure_chain
 
 #: The fields of a :class:`KernelState`: the dynamics, then the sensor chain's configuration and
@@ -246,10 +247,115 @@ def kernel_for(model: VehicleModel, exact: bool) -> Callable[..., int] | None:
     return _KERNELS[key]
 
 
-def chain_fields(chain: CompiledChain) -> tuple:
-    """The :data:`CHAIN` fields of a bound chain."""
-    return chain.configuration() + chain.begin()
+class CompiledStep:
+    """A bound simulator's compiled path: its kernel, its compiled sensor chain and what the
+    kernel keeps. :meth:`of` returns None for a simulator the kernel cannot run.
+
+    :param sim: the simulator (bound: its arrays and its sensors' are shared, not copied).
+    :param kernel: its step kernel (:func:`kernel_for`).
+    :param outputs: the measured outputs' map (:func:`output_map`).
+    """
+
+    def __init__(self, sim: Any, kernel: Callable[..., int], outputs: np.ndarray) -> None:
+        self.kernel, self.outputs = kernel, outputs
+        self.chain = CompiledChain(sim.sensors)
+        self.chain.bind(sim.batch_size)
+        self.stream = getattr(sim.disturbances, "stream", None)  # read by the kernel if any
+        self.measured_shape = (sim.batch_size, len(sim.sensors.channels))
+        self.state = self._state(sim)
+
+    @classmethod
+    def of(cls, sim: Any) -> CompiledStep | None:
+        """The compiled path of a bound simulator: None when it has effects, its own steps
+        (a subclass overriding them), sensor stages of other kinds, parameters per boat or
+        outputs that are not linear in the state."""
+        from .core import Simulator
+
+        numpy_steps = (type(sim).apply, type(sim).advance, type(sim).measure) != \
+            (Simulator.apply, Simulator.advance, Simulator.measure)
+        if numpy_steps or sim.effects or CompiledChain.of(sim.sensors) is None:
+            return None
+        exact = isinstance(sim.integrate, ExactStep)
+        if not exact and np.ndim(sim.model.constants) != 1:
+            return None
+        measured = [sim.model.output_names.index(c) for c in sim.sensors.channels]
+        outputs = output_map(sim.model, measured)
+        kernel = kernel_for(sim.model, exact)
+        return None if outputs is None or kernel is None else cls(sim, kernel, outputs)
+
+    def _state(self, sim: Any) -> KernelState:
+        """What the kernel keeps: constants, step counts, the streams', the sensors' arrays."""
+        if isinstance(sim.integrate, ExactStep):
+            offset = sim.integrate.offset
+            p = np.concatenate([sim.integrate.transition.ravel(),
+                                np.zeros(sim.x.shape[1]) if offset is None else offset])
+            h, substeps = sim.dt, 1
+        else:
+            p, h, substeps = sim.model.constants, sim.integrate.h, sim.integrate.substeps
+        allocation = sim._allocation
+        stream = self.stream
+        return new_state(
+            np.ascontiguousarray(p, dtype=float), float(h), int(substeps),
+            sim.u_mid[0].copy(), sim.u_scale[0].copy(),
+            np.zeros((1, 1)) if allocation is None else allocation, allocation is not None,
+            sim._weights.copy(),
+            np.zeros(sim._weights.size) if sim._reference is None else sim._reference,
+            sim._limited_list.astype(np.int64), sim._low[0].copy(), sim._high[0].copy(),
+            self.outputs, sim.steps, stream is not None,
+            np.zeros((1, 1)) if stream is None else stream.rows,
+            np.zeros(1, dtype=np.int64) if stream is None else stream.cursor,
+            *self.chain.configuration(), *self.chain.begin())
+
+    def step(self, sim: Any, action: Any, measure: bool):
+        """:meth:`Simulator.step` in one kernel call: ``(measurements or None, reward,
+        failed)``; the simulator's state arrays are replaced by new ones."""
+        a = sim._actions(action)
+        d = sim.d
+        if sim.disturbances is not None:
+            if self.stream is not None:
+                d = np.empty(sim.d.shape)  # the kernel reads the stream
+            elif all_finite(a):  # (else the kernel refuses the action: keep the source)
+                d = sim.disturbances.step()
+        n = sim.batch_size
+        x, u = np.empty(sim.x.shape), np.empty(sim.u.shape)  # (empty_like costs 3x more)
+        reward, failed, clipped = np.empty(n), np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        y = np.empty(self.measured_shape if measure else (0, 0))
+        valid = np.empty(y.shape, dtype=bool)
+        status = self.kernel(self.state, a, sim.x, d, x, u, reward, failed, clipped, measure,
+                             y, valid)
+        if status == BAD_ACTION:
+            raise ValueError(f"action contains NaN or inf: {a.tolist()!r}")
+        sim.d = d
+        if status >= 0:
+            raise FloatingPointError(f"simulation diverged: non-finite state {x[status]} of "
+                                     f"boat {status} (a parameter or time step out of range?)")
+        sim.x, sim.u, sim.clipped = x, u, clipped
+        if status == REFILL:
+            self.refill()
+        if measure:
+            self.chain.valid = valid
+        return (y if measure else None), reward, failed
+
+    def measure(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`Simulator.measure` of states ``x``."""
+        y = np.empty(self.measured_shape)
+        valid = np.empty(y.shape, dtype=bool)
+        if measure_boats(self.state, np.ascontiguousarray(x, dtype=float), y, valid):
+            self.refill()
+        self.chain.valid = valid
+        return y
+
+    def streams(self) -> list:
+        """The block streams the kernel reads: sensor noise, dropout, disturbances."""
+        streams = [getattr(self.chain.noise, "stream", None),
+                   getattr(self.chain.dropout, "stream", None), self.stream]
+        return [s for s in streams if s is not None]
+
+    def refill(self) -> None:
+        """Refill the random streams whose blocks the kernel used up."""
+        for stream in self.streams():
+            stream.refill_exhausted()
 
 
-__all__ = ["BAD_ACTION", "REFILL", "STEPPED", "KernelState", "all_finite", "chain_fields",
-           "exact_step", "kernel_for", "measure_boats", "new_state", "output_map", "step_kernel"]
+__all__ = ["BAD_ACTION", "REFILL", "STEPPED", "CompiledStep", "KernelState", "exact_step",
+           "kernel_for", "measure_boats", "new_state", "output_map", "step_kernel"]
