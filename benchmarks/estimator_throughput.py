@@ -23,7 +23,10 @@ MISSED): (a) a batch of 1024 with dropout and mid-run resets of some rows gives,
 rows, the x and P of each row's filter run alone, within 1e-10; (b) ours with ``N=1`` gives
 filterpy's x and P within 1e-10; (c) float32 on an ill-conditioned system keeps every predicted
 and updated P symmetric and positive definite at every step, in a batch of 1000 filters x 1000
-steps and in one filter run sequentially.
+steps and in one filter run sequentially; (d) the compiled per-filter kernels give, at every step
+of a batch with dropout and resets, the x and P of the numpy reference
+(:meth:`~estimators.kalman.KalmanFilter.run_in_numpy`) within 1e-12 relative (to each filter's
+largest entry), for both filters.
 
     python benchmarks/estimator_throughput.py [--quick] [--repeats 3] [--sequential-steps 500000]
                                              [--json out.json]
@@ -61,6 +64,8 @@ BATCH = 1024
 BATCHES = (256, BATCH)
 DROPOUT = 0.1
 TOLERANCE = 1e-10
+#: compiled kernels vs the numpy reference, relative to each filter's largest |x| or |P| entry
+EXACTNESS = 1e-12
 #: minimum filter-updates per second, by (row label, N) (issue 4)
 TARGETS = {("KalmanFilter", BATCH): 1e6}
 #: minimum ratio to filterpy in the same run, by (row label, N) (issue 23)
@@ -304,6 +309,45 @@ def batch_vs_single(system: System, *, adaptive: bool, batch: int = BATCH, steps
             "max_abs_x": err_x, "max_abs_P": err_P}
 
 
+def _relative_gap(a: NDArray, b: NDArray) -> float:
+    """Largest |a - b| of a filter over its largest |b|, the worst filter."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    axes = tuple(range(1, a.ndim))
+    scale = np.maximum(np.abs(b).max(axis=axes), np.finfo(float).tiny)
+    return float((np.abs(a - b).max(axis=axes) / scale).max())
+
+
+def compiled_vs_numpy(system: System, *, adaptive: bool, batch: int = 256, steps: int = 200,
+                      seed: int = 5) -> dict:
+    """Largest relative gap of the compiled kernels' x and P (predicted and updated) to the
+    numpy reference's at every step, with dropout and a reset of some rows every 50 steps."""
+    rng = np.random.default_rng(seed)
+    u, y = simulate(system, steps, batch, rng)
+    mask = dropout(steps, batch, rng)
+    ours, reference = make_filter(system, batch, adaptive=adaptive), make_filter(
+        system, batch, adaptive=adaptive)
+    reference.run_in_numpy()
+    gap_x = gap_P = 0.0
+    for k in range(steps):
+        if k % 50 == 25:
+            idx, x0 = rng.choice(batch, batch // 8, replace=False), rng.normal(size=N_X)
+            ours.reset(x0, idx=idx)
+            reference.reset(x0, idx=idx)
+        for f in (ours, reference):
+            f.predict(u[k])
+        gap_P = max(gap_P, _relative_gap(ours.P, reference.P))
+        for f in (ours, reference):
+            f.update(y[k], mask[k])
+        gap_x = max(gap_x, _relative_gap(ours.x, reference.x))
+        gap_P = max(gap_P, _relative_gap(ours.P, reference.P))
+    name = "AdaptiveKalmanFilter" if adaptive else "KalmanFilter"
+    return {"check": f"{name} N={batch} compiled vs numpy",
+            "passed": max(gap_x, gap_P) <= EXACTNESS,
+            "detail": f"{steps} steps, dropout + resets: max relative gap x {gap_x:.1e}, "
+                      f"P {gap_P:.1e} (<= {EXACTNESS:.0e})",
+            "max_rel_x": gap_x, "max_rel_P": gap_P}
+
+
 def ours_vs_filterpy(system: System, steps: int = 500, seed: int = 2) -> dict:
     """Max |x - x_filterpy| and |P - P_filterpy| over every step of one filter."""
     u, y = simulate(system, steps, 1, np.random.default_rng(seed))
@@ -413,14 +457,16 @@ def run_checks(quick: bool, sequential_steps: int) -> list[dict]:
     steps = 60 if quick else 200
     checks = [batch_vs_single(system, adaptive=False, steps=steps),
               batch_vs_single(system, adaptive=True, steps=steps),
-              ours_vs_filterpy(system)]
+              ours_vs_filterpy(system),
+              compiled_vs_numpy(system, adaptive=False, steps=steps),
+              compiled_vs_numpy(system, adaptive=True, steps=steps)]
     checks.append(float32_batch(1000, 100 if quick else 1000))
     checks.append(float32_sequential(sequential_steps))
     return checks
 
 
 def format_checks(checks: list[dict]) -> str:
-    return "\n".join(f"{'pass' if c['passed'] else 'FAIL':<6}{c['check']:<38}{c['detail']}"
+    return "\n".join(f"{'pass' if c['passed'] else 'FAIL':<6}{c['check']:<46}{c['detail']}"
                      for c in checks)
 
 
