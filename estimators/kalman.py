@@ -8,19 +8,27 @@ Model (filterpy's names, the paper's symbols in brackets)::
 ``c`` and ``d`` carry the trim of a model linearised about a point that is not the origin, so the
 filter works in the model's absolute units. The update is in Joseph form and the covariance is
 symmetrised after each step, so it stays symmetric positive definite, also in float32.
+
+Filters that hold a covariance each (some channels missing, resets of some filters, the adaptive
+filter's process noise) are stepped one filter at a time by compiled kernels (numba, the matrix
+sizes fixed at compile time); filters that share one covariance are stepped in numpy, where one
+gain serves the batch. The numpy code of the per-filter case stays as the reference the kernels
+are tested against (:meth:`KalmanFilter.run_in_numpy`).
 """
 
 from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
+from functools import cache
+from typing import Any, NamedTuple
 
 import numpy as np
 import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
+from marine_envs.compiled import jit, local_array
 from marine_envs.models import VehicleModel, zoh
 from marine_envs.models.linear import dlqe
 from marine_envs.sensors import GaussianNoise, Quantizer, WrapAngle
@@ -115,7 +123,9 @@ class KalmanFilter(Estimator):
         self._Q, self._R = self.Q.astype(t), self.R.astype(t)
         self._c, self._d = self.c.astype(t), self.d.astype(t)
         self._I = np.eye(n, dtype=t)
+        self._wrapped = np.isin(np.arange(m), self.angular)
         self._chi2_mean_weight = 0.05  # running mean over ~20 updates
+        self._kernels: _Kernels | None = _kernels(n, m)
         self.bind(batch_size)
 
     # -- construction from the project's models and environments --------------------------
@@ -172,12 +182,12 @@ class KalmanFilter(Estimator):
     @property
     def P(self) -> FloatArray:
         """Covariance of each filter's estimate, ``(N, n, n)`` (a read-only view)."""
-        return np.broadcast_to(self._P, (self.batch_size, self._n, self._n))
+        return _read_only(self._P, self.batch_size)
 
     @property
     def innovation_cov(self) -> FloatArray:
         """Covariance ``S = H P_pred H' + R`` of the last innovation, ``(N, m, m)``."""
-        return np.broadcast_to(self._S, (self.batch_size, *self._S.shape[1:]))
+        return _read_only(self._S, self.batch_size)
 
     @property
     def shared_covariance(self) -> bool:
@@ -197,6 +207,7 @@ class KalmanFilter(Estimator):
         self.dof = np.zeros(batch_size, dtype=np.intp)
         self._nis_mean = np.full(batch_size, float(m))
         self.diverged = np.zeros(batch_size, dtype=bool)
+        self._all_first = np.zeros(batch_size, dtype=bool)  # no filter takes the second Q
         self._updates = 0
 
     def reset(self, x0: ArrayLike | None = None, P0: ArrayLike | None = None,
@@ -223,26 +234,77 @@ class KalmanFilter(Estimator):
     def predict(self, u: ArrayLike, dt: float | None = None) -> FloatArray:
         if dt is not None and not math.isclose(dt, self.dt):
             raise ValueError(f"dt={dt} differs from the filter's period {self.dt} s")
-        u = as_batch("u", u, self.batch_size, self.G.shape[1]).astype(self.dtype, copy=False)
-        self.x = self.x @ self._FT + u @ self._GT + self._c
-        Q = self._process_noise()
-        if Q.shape[0] > self._P.shape[0]:
+        u = as_batch("u", u, self.batch_size, self.G.shape[1])
+        if self._noise_varies():
             self._split()
-        P = self.F @ self._P @ self._FT + Q
+        if self._per_filter_kernels():
+            x, P = np.empty_like(self.x), np.empty_like(self._P)
+            choices, second = self._noise_choices()
+            self._kernels.predict(self.F, self.G, self._c, choices, second, self.x,
+                                  _plain(u, self.dtype), self._P, x, P)
+            self.x, self._P = x, P
+            return self.x
+        u = u.astype(self.dtype, copy=False)
+        self.x = self.x @ self._FT + u @ self._GT + self._c
+        P = self.F @ self._P @ self._FT + self._process_noise()
         self._P = (P + P.transpose(0, 2, 1)) * 0.5
         return self.x
 
     def update(self, y: ArrayLike, mask: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
-        N, m = self.batch_size, self.H.shape[0]
-        y, valid = check_measurement(y, mask, self.measurement_names, N, self.dtype)
+        y, valid = check_measurement(y, mask, self.measurement_names, self.batch_size, self.dtype)
         every = bool(valid.all())
+        if not every:
+            self._split()
+        if self._per_filter_kernels():
+            finite = self._update_compiled(_plain(y, self.dtype), valid)
+        else:
+            finite = self._update_numpy(y, valid, every)
+        self._after_update(finite)
+        return self.x, self.P
+
+    @property
+    def compiled(self) -> bool:
+        """True when filters holding a covariance each are stepped by the compiled kernels."""
+        return self._kernels is not None
+
+    def run_in_numpy(self) -> None:
+        """Do the predictions and updates in numpy from now on, also for filters holding a
+        covariance each (the reference the compiled kernels are tested against; slower)."""
+        self._kernels = None
+
+    def _per_filter_kernels(self) -> bool:
+        return self._kernels is not None and self._P.shape[0] == self.batch_size
+
+    def __getstate__(self) -> dict[str, Any]:
+        # the kernels are compiled objects: looked up again (from the disk cache) on unpickling
+        return {**self.__dict__, "_kernels": self._kernels is not None}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self._kernels = _kernels(self._n, self.H.shape[0]) if state["_kernels"] else None
+
+    def _update_compiled(self, y: FloatArray, valid: NDArray[np.bool_]) -> NDArray[np.bool_]:
+        """One Joseph-form update of every filter by the compiled kernel; which stayed finite."""
+        N, m = y.shape
+        x, P = np.empty_like(self.x), np.empty_like(self._P)
+        e, S = np.empty_like(y), np.empty((N, m, m), dtype=self.dtype)
+        self.nis, self.dof = np.empty(N), np.empty(N, dtype=np.intp)
+        finite = np.empty(N, dtype=bool)
+        self._kernels.update(self.H, self._R, self._d, self._wrapped, self.x, self._P, y, valid,
+                             x, P, e, S, self.nis, self.dof, finite)
+        self.x, self._P, self.innovation, self._S = x, P, e, S
+        return finite
+
+    def _update_numpy(self, y: FloatArray, valid: NDArray[np.bool_], every: bool
+                      ) -> NDArray[np.bool_]:
+        """The update in numpy (one gain when the covariance is shared); which stayed finite."""
+        N, m = self.batch_size, self.H.shape[0]
         e = y - (self.x @ self._HT + self._d)
         if self.angular.size:
             e[:, self.angular] = _wrap(e[:, self.angular])
         if every:
             H, R = self.H[None], self._R[None]
         else:  # missing channels: zero rows of H and unit noise give them exactly zero gain
-            self._split()
             e = np.where(valid, e, 0)
             H = self.H * valid[:, :, None]
             both = valid[:, :, None] & valid[:, None, :]
@@ -267,8 +329,7 @@ class KalmanFilter(Estimator):
         self.innovation, self._S = e, S
         self.nis = np.einsum("ij,ij->i", e, S_inv_e).astype(float)
         self.dof = np.full(N, m) if every else valid.sum(axis=1)
-        self._after_update()
-        return self.x, self.P
+        return np.isfinite(self.x).all(axis=1) & np.isfinite(self._P).all(axis=(1, 2))
 
     # -- covariance sharing, statistics and health -----------------------------------------
     def _split(self) -> None:
@@ -287,18 +348,29 @@ class KalmanFilter(Estimator):
                 self._P = P[:1].copy()
 
     def _process_noise(self) -> FloatArray:
+        """The process-noise covariance of each filter's next prediction, ``(1, n, n)`` when
+        they share one."""
         return self._Q[None]
 
-    def _after_update(self) -> None:
+    def _noise_varies(self) -> bool:
+        """Whether the filters' next predictions take different process noises."""
+        return False
+
+    def _noise_choices(self) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """The process-noise covariances ``(k, n, n)`` a prediction picks from, and for each
+        filter whether it takes the second (the compiled kernels' form of
+        :meth:`_process_noise`)."""
+        return self._Q[None], self._all_first
+
+    def _after_update(self, finite: NDArray[np.bool_]) -> None:
+        """Merge covariances now and then, follow the innovation statistic, flag (and restart on
+        request) the filters that diverged (``finite``: which have a finite x and P)."""
         self._updates += 1
         if self._updates % 64 == 0:
             self._try_merge()
-        w = self._chi2_mean_weight
-        seen = self.dof > 0
-        self._nis_mean = np.where(seen, (1 - w) * self._nis_mean + w * self.nis, self._nis_mean)
-        finite = np.isfinite(self.x).all(axis=1) & np.isfinite(self._P).all(axis=(1, 2))
-        bad = ~finite | (self._nis_mean > self.divergence_ratio * self.H.shape[0])
-        if bad.any():
+        bad = np.empty(self.batch_size, dtype=bool)
+        if _follow_innovations(self.nis, self.dof, self._nis_mean, self._chi2_mean_weight,
+                               self.divergence_ratio * self.H.shape[0], finite, bad):
             self.diverged = self.diverged | bad
             if self.reinitialise_diverged:
                 self.reset(idx=np.flatnonzero(bad))
@@ -355,15 +427,287 @@ class AdaptiveKalmanFilter(KalmanFilter):
         self.high[rows], self.fired[rows] = False, False
 
     def _process_noise(self) -> FloatArray:
-        if self.high.all() or not self.high.any():
+        if not self._noise_varies():
             return self._Q_pair[1 if self.high[0] else 0][None]
         return self._Q_pair[self.high.astype(np.intp)]
 
-    def _after_update(self) -> None:
-        self.fired = self.nis > self._upper[self.dof]
-        below = self.nis < self._lower[self.dof]
-        self.high = np.where(self.fired, True, np.where(below, False, self.high))
-        super()._after_update()
+    def _noise_varies(self) -> bool:
+        return bool(self.high.any() and not self.high.all())
+
+    def _noise_choices(self) -> tuple[FloatArray, NDArray[np.bool_]]:
+        return self._Q_pair, self.high
+
+    def _after_update(self, finite: NDArray[np.bool_]) -> None:
+        self.high, self.fired = self.high.copy(), np.empty(self.batch_size, dtype=bool)
+        _switch_noise(self.nis, self.dof, self._upper, self._lower, self.high, self.fired)
+        super()._after_update(finite)
+
+
+# -- the per-filter step, compiled ------------------------------------------------------------
+# A filter at a time, with the matrix sizes fixed at compile time: the loops are unrolled and the
+# scratch matrices live on the stack, so a covariance per filter costs what its arithmetic costs
+# (numpy's batched small-matrix calls cost more in overhead than in arithmetic). Sums are in
+# float64 also for float32 filters. The same formulas as the numpy code: the missing channels get
+# zero rows of H and unit noise (hence zero gain), the update is in Joseph form, and each
+# covariance is computed once per pair (i, j), so it is exactly symmetric.
+class _Kernels(NamedTuple):
+    """The compiled per-filter steps of filters of ``n`` states and ``m`` channels.
+
+    ``predict(F, G, c, Qs, second, x, u, P, x_out, P_out)``: ``x_out = F x + G u + c`` and
+    ``P_out = F P F' + Q`` per filter, ``Q = Qs[1]`` where ``second`` else ``Qs[0]``.
+
+    ``update(H, R, d, wrapped, x, P, y, valid, x_out, P_out, e, S, nis, dof, finite)``: the
+    Joseph-form update with the ``valid`` channels of ``y``, the innovation (0 where missing;
+    wrapped to (-pi, pi] where ``wrapped``), its covariance, its normalised square, the number of
+    channels used and whether ``x_out`` and ``P_out`` are finite, per filter.
+    """
+
+    predict: Callable[..., None]
+    update: Callable[..., None]
+
+
+@cache
+def _kernels(n: int, m: int) -> _Kernels:
+    """The kernels of ``n`` states and ``m`` channels (compiled on first use, cached on disk)."""
+    nn, nm, mm = n * n, n * m, m * m
+    # the compiled functions they call are closure cells, not globals: the disk cache's key
+    # visits a function's globals in the order of a set of names, which changes from process to
+    # process (a miss each time) once there are two; closure cells have a fixed order
+    stack, predict_one = local_array, _predict_one
+    model, covariance, cholesky, whitened = (_masked_model, _innovation_covariance, _cholesky,
+                                             _whitened_square)
+    gain, corrected, joseph = _gain, _corrected, _joseph
+
+    @jit
+    def predict(F, G, c, Qs, second, x, u, P, x_out, P_out):
+        FP = stack(nn)
+        switching = Qs.shape[0] > 1
+        for b in range(x.shape[0]):
+            Q = Qs[1] if switching and second[b] else Qs[0]
+            predict_one(F, G, c, Q, x[b], u[b], P[b], x_out[b], P_out[b], FP, n)
+
+    @jit
+    def update(H, R, d, wrapped, x, P, y, valid, x_out, P_out, e, S, nis, dof, finite):
+        Hm, Rm, U, L = stack(nm), stack(mm), stack(nm), stack(mm)
+        K, KR, A, AP = stack(nm), stack(nm), stack(nn), stack(nn)
+        inv, z = stack(m), stack(m)
+        for b in range(x.shape[0]):
+            dof[b] = model(H, R, d, wrapped, x[b], y[b], valid[b], e[b], Hm, Rm, n, m)
+            covariance(P[b], Hm, Rm, U, L, S[b], n, m)
+            cholesky(L, inv, m)
+            nis[b] = whitened(e[b], L, inv, z, m)
+            gain(U, L, inv, K, n, m)
+            finite[b] = (corrected(x[b], K, e[b], x_out[b], n, m)
+                         & joseph(P[b], Hm, Rm, K, A, AP, KR, P_out[b], n, m))
+
+    return _Kernels(predict, update)
+
+
+@jit
+def _predict_one(F, G, c, Q, x, u, P, x_out, P_out, FP, n):
+    """One filter's prediction (``FP``: scratch of ``n * n``)."""
+    for i in range(n):
+        t = c[i]
+        for k in range(n):
+            t += F[i, k] * x[k]
+        for k in range(u.size):
+            t += G[i, k] * u[k]
+        x_out[i] = t
+    for i in range(n):
+        for j in range(n):
+            t = 0.0
+            for k in range(n):
+                t += F[i, k] * P[k, j]
+            FP[i * n + j] = t
+    for i in range(n):
+        for j in range(i, n):
+            t = 0.0
+            for k in range(n):
+                t += FP[i * n + k] * F[j, k]
+            t += Q[i, j]
+            P_out[i, j] = t
+            P_out[j, i] = t
+
+
+@jit
+def _masked_model(H, R, d, wrapped, x, y, valid, e, Hm, Rm, n, m):
+    """The innovation ``e`` of one filter (0 where missing), ``Hm`` (``m x n``, rows of the
+    missing channels 0) and ``Rm`` (``m x m``, the valid channels' noise, identity for the
+    missing); returns the number of valid channels."""
+    count = 0
+    for a in range(m):
+        t = d[a]
+        for k in range(n):
+            t += H[a, k] * x[k]
+        r = y[a] - t
+        if wrapped[a]:
+            r = math.pi - (math.pi - r) % (2 * math.pi)
+        e[a] = r if valid[a] else 0.0
+        count += valid[a]
+        for k in range(n):
+            Hm[a * n + k] = H[a, k] if valid[a] else 0.0
+        for c in range(m):
+            both = valid[a] and valid[c]
+            Rm[a * m + c] = R[a, c] if both else (1.0 if a == c else 0.0)
+    return count
+
+
+@jit
+def _innovation_covariance(P, Hm, Rm, U, L, S, n, m):
+    """``U = P Hm'`` (``n x m``) and ``S = Hm U + Rm``, written to ``S`` and to the lower
+    triangle of ``L``."""
+    for i in range(n):
+        for a in range(m):
+            t = 0.0
+            for k in range(n):
+                t += P[i, k] * Hm[a * n + k]
+            U[i * m + a] = t
+    for a in range(m):
+        for c in range(a + 1):
+            t = 0.0
+            for k in range(n):
+                t += Hm[a * n + k] * U[k * m + c]
+            t += Rm[a * m + c]
+            L[a * m + c] = t
+            S[a, c] = t
+            S[c, a] = t
+
+
+@jit
+def _cholesky(L, inv, m):
+    """The Cholesky factor of the lower triangle of ``L``, in place, and the reciprocals of its
+    diagonal in ``inv`` (a matrix that is not positive definite gives NaN)."""
+    for c in range(m):
+        t = L[c * m + c]
+        for k in range(c):
+            t -= L[c * m + k] * L[c * m + k]
+        L[c * m + c] = math.sqrt(t)
+        inv[c] = 1.0 / L[c * m + c]
+        for a in range(c + 1, m):
+            t = L[a * m + c]
+            for k in range(c):
+                t -= L[a * m + k] * L[c * m + k]
+            L[a * m + c] = t * inv[c]
+
+
+@jit
+def _whitened_square(e, L, inv, z, m):
+    """``e' S^-1 e = |L^-1 e|^2`` (``z``: scratch of ``m``)."""
+    total = 0.0
+    for a in range(m):
+        t = e[a]
+        for k in range(a):
+            t -= L[a * m + k] * z[k]
+        z[a] = t * inv[a]
+        total += z[a] * z[a]
+    return total
+
+
+@jit
+def _gain(U, L, inv, K, n, m):
+    """``K = U S^-1`` (``n x m``), each row solving ``L L' k = u``."""
+    for i in range(n):
+        for a in range(m):
+            t = U[i * m + a]
+            for k in range(a):
+                t -= L[a * m + k] * K[i * m + k]
+            K[i * m + a] = t * inv[a]
+        for a in range(m - 1, -1, -1):
+            t = K[i * m + a]
+            for k in range(a + 1, m):
+                t -= L[k * m + a] * K[i * m + k]
+            K[i * m + a] = t * inv[a]
+
+
+@jit
+def _corrected(x, K, e, x_out, n, m):
+    """``x_out = x + K e``; whether it is finite."""
+    finite = True
+    for i in range(n):
+        t = x[i]
+        for a in range(m):
+            t += K[i * m + a] * e[a]
+        x_out[i] = t
+        finite = finite and np.isfinite(t)
+    return finite
+
+
+@jit
+def _joseph(P, Hm, Rm, K, A, AP, KR, P_out, n, m):
+    """``P_out = (I - K Hm) P (I - K Hm)' + K Rm K'``; whether it is finite (``A``, ``AP``,
+    ``KR``: scratch)."""
+    for i in range(n):
+        for j in range(n):
+            t = 1.0 if i == j else 0.0
+            for a in range(m):
+                t -= K[i * m + a] * Hm[a * n + j]
+            A[i * n + j] = t
+    for i in range(n):
+        for j in range(n):
+            t = 0.0
+            for k in range(n):
+                t += A[i * n + k] * P[k, j]
+            AP[i * n + j] = t
+        for a in range(m):
+            t = 0.0
+            for c in range(m):
+                t += K[i * m + c] * Rm[c * m + a]
+            KR[i * m + a] = t
+    finite = True
+    for i in range(n):
+        for j in range(i, n):
+            t = 0.0
+            for k in range(n):
+                t += AP[i * n + k] * A[j * n + k]
+            for a in range(m):
+                t += KR[i * m + a] * K[j * m + a]
+            P_out[i, j] = t
+            P_out[j, i] = t
+            finite = finite and np.isfinite(t)
+    return finite
+
+
+def _plain(a: NDArray, dtype: np.dtype) -> NDArray:
+    """``a`` as a writable C-contiguous array of ``dtype`` (the one layout the kernels are
+    compiled for: read-only or strided arrays would each compile a variant)."""
+    if a.dtype == dtype and a.flags.c_contiguous and a.flags.writeable:
+        return a
+    return np.array(a, dtype=dtype, order="C")
+
+
+@jit
+def _follow_innovations(nis, dof, nis_mean, weight, limit, finite, bad):
+    """Fold each filter's normalised innovation squared into its running mean (in place; a
+    filter that measured nothing keeps its mean) and mark in ``bad`` the filters not ``finite``
+    or with a mean above ``limit``; returns whether any is bad."""
+    any_bad = False
+    for b in range(nis.size):
+        if dof[b] > 0:
+            nis_mean[b] = (1 - weight) * nis_mean[b] + weight * nis[b]
+        bad[b] = not finite[b] or nis_mean[b] > limit
+        any_bad = any_bad or bad[b]
+    return any_bad
+
+
+@jit
+def _switch_noise(nis, dof, upper, lower, high, fired):
+    """The adaptive filter's test: ``fired`` where the statistic exceeds the upper threshold for
+    its degrees of freedom; ``high`` (in place) set there, cleared below the lower one."""
+    for b in range(nis.size):
+        fired[b] = nis[b] > upper[dof[b]]
+        if fired[b]:
+            high[b] = True
+        elif nis[b] < lower[dof[b]]:
+            high[b] = False
+
+
+def _read_only(a: NDArray, rows: int) -> NDArray:
+    """A read-only view of ``a`` ``(k, ...)`` with ``rows`` rows (``k`` is 1 or ``rows``)."""
+    if a.shape[0] != rows:
+        return np.broadcast_to(a, (rows, *a.shape[1:]))
+    view = a.view()
+    view.flags.writeable = False
+    return view
 
 
 def _output_matrix(model: VehicleModel, measured: Sequence[str],

@@ -1,5 +1,7 @@
 """Kalman and adaptive Kalman filters: optimality, consistency, batching, bad input."""
 
+import pickle
+
 import numpy as np
 import pytest
 import scipy.stats
@@ -168,13 +170,16 @@ def test_batched_filters_equal_single_ones_with_masks_resets_and_switching():
             np.testing.assert_allclose(P[0], many.P[i], atol=1e-10, rtol=0)
 
 
-def test_missing_channel_gets_no_gain_and_nan_is_missing():
+@pytest.mark.parametrize("compiled", [True, False])
+def test_missing_channel_gets_no_gain_and_nan_is_missing(compiled):
     F, G, H, Q, R = system()
     a = KalmanFilter(F, G, H, Q, R, dt=0.1)
     b = KalmanFilter(F, G, H, Q, R, dt=0.1)
     H1 = H[:1]
     c = KalmanFilter(F, G, H1, Q, R[:1, :1], dt=0.1)
     for f in (a, b, c):
+        if not compiled:
+            f.run_in_numpy()
         f.predict([[0.5]])
     a.update([[0.3, np.nan]])
     b.update([[0.3, 123.0]], mask=[[True, False]])
@@ -185,8 +190,10 @@ def test_missing_channel_gets_no_gain_and_nan_is_missing():
         assert np.isfinite(f.x).all()
 
 
-def test_covariance_stays_symmetric_positive_definite_in_float32():
-    """Badly scaled states (1e3 and 1e-3) and a nearly unobservable mode, 20 000 steps."""
+@pytest.mark.parametrize("dropout", [0.0, 0.1])
+def test_covariance_stays_symmetric_positive_definite_in_float32(dropout):
+    """Badly scaled states (1e3 and 1e-3) and a nearly unobservable mode, 20 000 steps; with
+    dropout each filter holds its own covariance (the compiled kernels), else they share one."""
     A = np.array([[0, 1, 0], [0, -1e-3, 0], [0, 0, -1e-4]])
     F, G = zoh(A, np.array([[0.0], [1.0], [0.0]]), 0.1)
     H = np.array([[1.0, 0, 1e-4]])
@@ -194,31 +201,146 @@ def test_covariance_stays_symmetric_positive_definite_in_float32():
     kf = KalmanFilter(F, G, H, Q, [[1e-4]], dt=0.1, dtype=np.float32, batch_size=2,
                       P0=np.diag([1e6, 1.0, 1e-6]))
     rng = np.random.default_rng(8)
-    lowest = np.inf
+    masks = rng.random((20000, 2, 1)) >= dropout
+    lowest, per_filter = np.inf, 0
     for k in range(20000):
         kf.predict(np.zeros((2, 1)))
-        kf.update(rng.normal(size=(2, 1)) * 1e3)
+        kf.update(rng.normal(size=(2, 1)) * 1e3, masks[k])
+        per_filter += not kf.shared_covariance
         if k % 500 == 0:
             lowest = min(lowest, np.linalg.eigvalsh(kf.P.astype(float)).min())
             assert np.array_equal(kf.P, kf.P.transpose(0, 2, 1))
     assert kf.x.dtype == np.float32 and lowest > 0 and np.isfinite(kf.x).all()
+    assert per_filter > 10000 if dropout else per_filter == 0
 
 
-def test_diverging_filter_is_flagged_and_reinitialised_on_request():
+@pytest.mark.parametrize("compiled, per_filter", [(True, True), (False, True), (True, False)])
+def test_diverging_filter_is_flagged_and_reinitialised_on_request(compiled, per_filter):
     F, G, H, Q, R = system()
     xs, us, ys = simulate(F, G, H, Q, R, 100, 2, seed=9)
     ys[60:, 1] += 50.0  # filter 1's sensor jumps: its innovations explode
+    masks = np.ones((100, 2, 2), dtype=bool)
+    masks[::7, 0, 1] = not per_filter  # a missing channel now and then: a covariance each
     for reinit in (False, True):
         kf = KalmanFilter(F, G, H, Q, R, dt=0.1, batch_size=2, reinitialise_diverged=reinit)
+        if not compiled:
+            kf.run_in_numpy()
         flagged = []
         for k in range(100):
             kf.predict(us[k])
-            kf.update(ys[k])
+            kf.update(ys[k], masks[k])
             flagged.append(kf.diverged.copy())
         flagged = np.array(flagged)
         assert not flagged[:60].any() and not flagged[:, 0].any()
         assert flagged[-1, 1]
         assert np.isfinite(kf.x).all()
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_covariance_that_overflows_is_flagged_not_left_as_silent_nan(compiled):
+    """An unstable model with no measurements: the covariance of filter 1 overflows float32 and
+    turns NaN; the filter is flagged diverged (and restarted on request), filter 0 is not."""
+    F = np.diag([1.5, 1.2])
+    for reinit in (False, True):
+        kf = KalmanFilter(F, np.zeros((2, 1)), np.eye(2), np.eye(2), np.eye(2), dt=0.1,
+                          batch_size=2, dtype=np.float32, reinitialise_diverged=reinit)
+        if not compiled:
+            kf.run_in_numpy()
+        mask = np.array([[True, True], [False, False]])
+        with np.errstate(over="ignore", invalid="ignore"):  # numpy's path says it overflowed
+            for _ in range(300):
+                kf.predict(np.zeros((2, 1)))
+                kf.update(np.zeros((2, 2)), mask)
+        assert kf.diverged.tolist() == [False, True]
+        assert np.isfinite(kf.P[0]).all() and np.isfinite(kf.x[0]).all()
+        assert np.isfinite(kf.P[1]).all() == np.isfinite(kf.x[1]).all() == reinit
+
+
+def _random_system(rng, n, m):
+    """A stable (spectral radius 0.95) system with full noise covariances."""
+    A = rng.normal(size=(n, n))
+    F = 0.95 * A / np.abs(np.linalg.eigvals(A)).max()
+    L, M = rng.normal(size=(n, n)), rng.normal(size=(m, m))
+    Q, R = 0.01 * (L @ L.T / n + np.eye(n)), 0.1 * (M @ M.T / m + np.eye(m))
+    return F, rng.normal(size=(n, 2)), rng.normal(size=(m, n)), Q, R
+
+
+def _relative_gap(a, b, scale=None):
+    """Largest |a - b| of each filter over its ``scale`` (default: the largest |b| of that
+    filter), the worst filter."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    axes = tuple(range(1, a.ndim))
+    scale = np.abs(b).max(axis=axes) if scale is None else scale
+    gap = np.abs(a - b).max(axis=axes) if axes else np.abs(a - b)
+    return float((gap / np.maximum(scale, np.finfo(float).tiny)).max())
+
+
+def _step_gap(compiled, reference, x_pred, y, valid):
+    """The relative gap of an update: x, P and S relative to their largest entry; the
+    innovation relative to the larger of the measurement and its prediction (it is their
+    difference); the normalised innovation squared relative to 1 + itself."""
+    gaps = [_relative_gap(getattr(compiled, name), getattr(reference, name))
+            for name in ("x", "P", "innovation_cov")]
+    seen = np.where(valid & np.isfinite(y), np.abs(y), 0).max(axis=1)
+    predicted = np.abs(x_pred @ reference.H.T + reference.d).max(axis=1)
+    gaps.append(_relative_gap(compiled.innovation, reference.innovation,
+                              np.maximum(seen, predicted)))
+    gaps.append(_relative_gap(compiled.nis, reference.nis, 1 + reference.nis))
+    return max(gaps)
+
+
+@pytest.mark.parametrize("adaptive", [False, True])
+@pytest.mark.parametrize("n, m, angular, seed", [(5, 4, (), 11), (3, 2, (1,), 12),
+                                                 (4, 1, (0,), 13)])
+def test_compiled_kernels_equal_the_numpy_reference_at_every_step(n, m, angular, seed, adaptive):
+    """Random systems, random dropout (some filters missing every channel at times), NaN
+    measurements, angles measured off by whole turns, resets of random filters (some to their
+    own x0 and P0): the predicted P, the updated x and P, the innovation, its covariance and
+    statistic agree to 1e-12 relative at every step, and every flag exactly."""
+    rng = np.random.default_rng(seed)
+    F, G, H, Q, R = _random_system(rng, n, m)
+    N, steps = 24, 150
+    kw = {"Q_max": 10 * Q} if adaptive else {}
+    cls = AdaptiveKalmanFilter if adaptive else KalmanFilter
+    compiled, reference = (cls(F, G, H, Q, R, dt=0.1, batch_size=N, angular=angular,
+                               P0=np.eye(n), **kw) for _ in range(2))
+    reference.run_in_numpy()
+    x = rng.normal(size=(N, n))
+    worst, per_filter = 0.0, 0
+    for k in range(steps):
+        if k % 37 == 20:  # restart a few filters, from defaults or from their own x0 and P0
+            idx = rng.choice(N, 5, replace=False)
+            x0, P0 = rng.normal(size=(5, n)), 2 * np.eye(n) + 0.1 * np.ones((n, n))
+            for f in (compiled, reference):
+                f.reset(x0, P0, idx=idx) if k % 2 else f.reset(idx=idx)
+        u = rng.normal(size=(N, 2))
+        x = x @ F.T + u @ G.T + rng.multivariate_normal(np.zeros(n), Q, N)
+        y = x @ H.T + rng.multivariate_normal(np.zeros(m), R, N)
+        y[:, list(angular)] += 2 * np.pi * rng.integers(-2, 3, size=(N, len(angular)))
+        mask = rng.random((N, m)) >= (0.15 if k % 10 < 7 else 0.0)  # dropout, then none
+        mask[rng.random(N) < 0.05] = False  # nothing measured
+        y[rng.random((N, m)) < 0.02] = np.nan  # missing too
+        x_pred = compiled.predict(u)
+        reference.predict(u)
+        worst = max(worst, _relative_gap(compiled.P, reference.P))
+        for f in (compiled, reference):
+            f.update(y, mask)
+        per_filter += not compiled.shared_covariance
+        worst = max(worst, _step_gap(compiled, reference, x_pred, y, mask))
+        for name in ("dof", "diverged") + (("high", "fired") if adaptive else ()):
+            np.testing.assert_array_equal(getattr(compiled, name), getattr(reference, name))
+        assert compiled.shared_covariance == reference.shared_covariance
+    assert worst <= 1e-12
+    assert per_filter > steps // 2  # the kernels did run
+    assert compiled.compiled and not reference.compiled
+
+
+def test_pickled_filter_keeps_its_path():
+    F, G, H, Q, R = system()
+    kf = KalmanFilter(F, G, H, Q, R, dt=0.1, batch_size=3)
+    assert pickle.loads(pickle.dumps(kf)).compiled
+    kf.run_in_numpy()
+    assert not pickle.loads(pickle.dumps(kf)).compiled
 
 
 @pytest.mark.parametrize("kwargs, message", [
