@@ -243,8 +243,12 @@ class WaveRealisation(BlockSource):
             # amplitudes tabulated over Hs (2 % steps) and interpolated in between
             lo, hi = sea.hs_range()
             self._hs_grid = np.geomspace(lo, hi, max(2, int(np.log(hi / lo) / 0.02) + 2))
-            self._gain_table = np.stack([self._amplitude(hs)[:, None] * response
-                                         for hs in self._hs_grid])
+            table = np.stack([self._amplitude(hs)[:, None] * response for hs in self._hs_grid])
+            # component-major real and imaginary parts, as _shaped_weights reads them
+            table = table.transpose(1, 0, 2)  # (n, Hs, c)
+            rotations = self._rotations.T  # (n, BLOCK)
+            self._shaping = tuple(np.ascontiguousarray(a) for a in (
+                rotations.real, rotations.imag, table.real, table.imag))
         elif sea.varying:
             self._gain = self._amplitude(1.0)[:, None] * response  # amplitude scales with Hs
         else:
@@ -305,7 +309,7 @@ class WaveRealisation(BlockSource):
             j = np.minimum(pos.astype(np.intp), self._hs_grid.size - 2)
             n, c = self.omega.size, self.n_channels
             weights = np.empty((2 * n, BLOCK * c))
-            _shaped_weights(self._rotations, self._gain_table, j, pos - j, weights)
+            _shaped_weights(*self._shaping, j, pos - j, weights)
             if len(self._shaped_cache) >= SHAPED_CACHE:
                 del self._shaped_cache[next(iter(self._shaped_cache))]  # the oldest
             self._shaped_cache[start] = weights
@@ -319,19 +323,22 @@ class WaveRealisation(BlockSource):
 
 
 @jit
-def _shaped_weights(rotations, table, j, w, out):
+def _shaped_weights(rotation_re, rotation_im, table_re, table_im, j, w, out):
     """The weights of :meth:`WaveRealisation._shaped_weights`: ``out[i, t c + k]`` is the real
-    part (``i < n``) or minus the imaginary part (``i = n + i'``) of ``rotations[t, i] *
-    G_ik(Hs(t))``, the gains interpolated between rows ``j[t]`` and ``j[t] + 1`` of ``table`` with
-    weight ``w[t]`` (compiled: a block per boat of a single environment would otherwise cost
-    more than its 256 steps of physics)."""
-    steps, n = rotations.shape
-    c = table.shape[2]
-    for t in range(steps):
-        row, weight = j[t], w[t]
-        for i in range(n):
+    part (``i < n``) or minus the imaginary part (row ``n + i``) of ``rotation[i, t] G_ik(Hs(t))``,
+    the gains interpolated between rows ``j[t]`` and ``j[t] + 1`` of ``table[i]`` with weight
+    ``w[t]``. Compiled (a block per boat of a single environment would otherwise cost more than
+    its 256 steps of physics), component by component (contiguous writes), on real and imaginary
+    parts (numba's complex product guards infinities in a call of its own)."""
+    n, steps = rotation_re.shape
+    c = table_re.shape[2]
+    for i in range(n):
+        for t in range(steps):
+            row, weight = j[t], w[t]
+            keep = 1 - weight
+            r_re, r_im = rotation_re[i, t], rotation_im[i, t]
             for k in range(c):
-                gain = (1 - weight) * table[row, i, k] + weight * table[row + 1, i, k]
-                z = rotations[t, i] * gain
-                out[i, t * c + k] = z.real
-                out[n + i, t * c + k] = -z.imag
+                g_re = keep * table_re[i, row, k] + weight * table_re[i, row + 1, k]
+                g_im = keep * table_im[i, row, k] + weight * table_im[i, row + 1, k]
+                out[i, t * c + k] = r_re * g_re - r_im * g_im
+                out[n + i, t * c + k] = -(r_re * g_im + r_im * g_re)
