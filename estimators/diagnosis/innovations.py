@@ -86,7 +86,7 @@ class Innovations:
         # the one layout the loops are compiled for (the filter's arrays are views: strided,
         # broadcast, read-only)
         for name in ("M", "Gamma", "PhiK", "H", "L_inv", "K", "H_raw", "Phi", "C"):
-            setattr(self, name, _c(getattr(self, name)))
+            setattr(self, name, c_array(getattr(self, name)))
 
     @classmethod
     def from_filter(cls, ekf: ExtendedKalmanFilter, run: FilterResult, u: FloatArray,
@@ -122,13 +122,13 @@ class Innovations:
         channel; ``(T, m)`` or ``(T, m, R)``)."""
         if self.ar is None:
             return x
-        out = _c(x.reshape(x.shape[0], x.shape[1], -1), copy=True)
-        fir(_c(self.ar), out)
+        out = c_array(x.reshape(x.shape[0], x.shape[1], -1), copy=True)
+        fir(c_array(self.ar), out)
         return out.reshape(x.shape)
 
     def _taps(self) -> FloatArray:
         """The prediction-error filters ``(m, p + 1)``; a unit tap without them."""
-        return np.ones((self.nu.shape[1], 1)) if self.ar is None else _c(self.ar)
+        return np.ones((self.nu.shape[1], 1)) if self.ar is None else c_array(self.ar)
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -142,8 +142,8 @@ class Innovations:
         filter's shift (as in :meth:`response`), then the Rauch-Tung-Striebel recursion;
         the model's states only ``(T, n_model)``."""
         T, m, n = self.shape
-        w = np.zeros((T, 0)) if w is None else _c(w)
-        v = np.zeros((T, m)) if v is None else _c(v)
+        w = np.zeros((T, 0)) if w is None else c_array(w)
+        v = np.zeros((T, m)) if v is None else c_array(v)
         smoothed = np.empty((T, n))
         shift_loop(self.K, self.H_raw, self.Phi, self.Gamma, self.C, w, v, smoothed)
         return smoothed[:, :self.n_model]
@@ -154,16 +154,17 @@ class Innovations:
         ``v`` ``(T, m, R)`` added to the measured channels (channel units)."""
         T, m, _ = self.shape
         R = (w if w is not None else v).shape[2]  # type: ignore[union-attr]
-        w = np.zeros((T, 0, R)) if w is None else _c(w)
-        v = np.zeros((T, 0, R)) if v is None else _c(v)
+        w = np.zeros((T, 0, R)) if w is None else c_array(w)
+        v = np.zeros((T, 0, R)) if v is None else c_array(v)
         out = np.empty((T, m, R))
         response_loop(self.M, self.Gamma, self.PhiK, self.H, self.L_inv, w, v, self._taps(),
                       out)
         return out
 
 
-def _c(a: FloatArray, copy: bool = False) -> FloatArray:
-    """``a`` as a writable C-contiguous float64 array (a copy if it is not one, or asked)."""
+def c_array(a: FloatArray, copy: bool = False) -> FloatArray:
+    """``a`` as a writable C-contiguous float64 array (a copy if it is not one, or asked): the
+    one layout the compiled loops are compiled for."""
     usable = a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable
     return a if usable and not copy else np.array(a, dtype=np.float64, order="C")
 
