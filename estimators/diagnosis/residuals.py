@@ -418,20 +418,21 @@ def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatA
     variance = np.array([f.variance for f in forcing])
     outputs = [model.output_names.index(c) for c in channels]
     if not forcing and model.output_names == model.state_names:
-        h: Any = np.eye(n)[outputs]  # as ExtendedKalmanFilter.from_model measures states
+        h: Any = np.eye(n)[outputs]  # a matrix, as ExtendedKalmanFilter.from_model's
     else:
         def h(z: FloatArray) -> FloatArray:
             return model.output(z[:, :n])[:, outputs]
 
     decay = np.exp(-2 * dt / tau)
     Q = np.diag(np.concatenate([q, variance * (1 - decay), np.zeros(len(steady))]))
-    names = ([f"forcing_{model.state_names[f.state]}" for f in own]  # type: ignore[index]
-             + [model.disturbance_names[f.disturbance] for f in environment]  # type: ignore
-             + [f"steady_{model.disturbance_names[f.disturbance]}" for f in steady])  # type: ignore
+    dynamics = AugmentedDynamics(model, own, environment)
+    names = ([f"forcing_{model.state_names[i]}" for i in dynamics.rows]
+             + [model.disturbance_names[c] for c in dynamics.channels]
+             + [f"steady_{model.disturbance_names[c]}" for c in dynamics.steady])
     prior = np.concatenate([variance, [f.steady for f in steady]])
     return ExtendedKalmanFilter(
-        AugmentedDynamics(model, own, environment), h, dt=dt, Q=Q, R=np.diag(noise**2),
-        n_inputs=len(model.input_names), state_names=(*model.state_names, *names),
+        dynamics, h, dt=dt, Q=Q, R=np.diag(noise**2), n_inputs=len(model.input_names),
+        state_names=(*model.state_names, *names),
         measurement_names=channels, x0=np.concatenate([x0, np.zeros(len(prior))]),
         P0=linalg.block_diag(P0, np.diag(prior)), substeps=substeps)
 
@@ -442,8 +443,9 @@ class AugmentedDynamics:
     forcings added and the environment's channels (plus their steady parts) as its
     disturbances; each forcing a first-order Gauss-Markov process, a steady part constant.
 
-    Compiled (:func:`augmented_rows`) for a model with compiled equations: the smoother calls
-    it five times a step; numpy (:meth:`reference`) for any other.
+    Compiled (:func:`augmented_rows`) for a model with compiled equations (the filter calls it
+    at every RK4 stage and for every Jacobian, on a few rows, where a numpy call costs mostly
+    its overhead); numpy (:meth:`reference`) for any other.
 
     :param own: the equations' own forcings (``Forcing.state`` set), in the filter's order.
     :param environment: the environment's channels (``Forcing.disturbance`` set).
@@ -461,6 +463,7 @@ class AugmentedDynamics:
         compiled = type(model).equations is not None and type(model).rhs is VehicleModel.rhs \
             and model.constants.ndim == 1
         self._kernel = augmented_rows(type(model).equations.core) if compiled else None
+        self._p = c_array(model.constants) if compiled else None
 
     def __call__(self, z: FloatArray, u: FloatArray, _theta: FloatArray) -> FloatArray:
         """``z_dot`` ``(R, width)`` of states ``z`` ``(R, width)`` with inputs ``u``
@@ -468,8 +471,8 @@ class AugmentedDynamics:
         if self._kernel is None:
             return self.reference(z, u)
         out = np.empty((z.shape[0], self.width))
-        self._kernel(c_array(z), c_array(u), self.model.constants, self.rows, self.channels,
-                     self.steady, self.tau, self.n, self.n_d, out)
+        self._kernel(c_array(z), c_array(u), self._p, self.rows, self.channels, self.steady,
+                     self.tau, self.n, self.n_d, out)
         return out
 
     def reference(self, z: FloatArray, u: FloatArray) -> FloatArray:
