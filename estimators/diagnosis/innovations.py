@@ -174,19 +174,25 @@ def c_array(a: FloatArray, copy: bool = False) -> FloatArray:
 def response_loop(M, Gamma, PhiK, H, L_inv, w, v, ar, out):
     """:meth:`Innovations.response` written to ``out`` ``(T, m, R)``: ``d_{k+1} = M_k d_k +
     Gamma_k w_k - PhiK_k v_k`` from ``d_0 = 0``, ``g_k = H_k d_k + L_inv_k v_k``, each channel
-    through its filter ``ar`` (:func:`fir`). ``w`` ``(T, n_w, R)`` enters the first ``n_w``
-    states; ``v`` ``(T, m, R)``, or ``(T, 0, R)`` for none."""
+    through its filter ``ar`` (:func:`fir`; the last ``g`` kept in a ring, so that ``out`` is
+    written once). ``w`` ``(T, n_w, R)`` enters the first ``n_w`` states; ``v`` ``(T, m, R)``,
+    or ``(T, 0, R)`` for none."""
     T, m, R = out.shape
-    n, n_w, n_v = M.shape[1], w.shape[1], v.shape[1]
+    n, n_w, n_v, taps = M.shape[1], w.shape[1], v.shape[1], ar.shape[1]
     d, ahead = np.zeros((n, R)), np.empty((n, R))
+    ring = np.empty((taps, m, R))
     for k in range(T):
         for j in range(m):
-            g = out[k, j]
+            g = ring[k % taps, j]
             g[:] = 0.0
             for i in range(n):
                 _axpy(H[k, j, i], d[i], g)
             for c in range(n_v):
                 _axpy(L_inv[k, j, c], v[k, c], g)
+            y = out[k, j]
+            y[:] = 0.0
+            for i in range(min(taps, k + 1)):
+                _axpy(ar[j, i], ring[(k - i) % taps, j], y)
         if k == T - 1:
             break
         for i in range(n):
@@ -199,7 +205,6 @@ def response_loop(M, Gamma, PhiK, H, L_inv, w, v, ar, out):
             for c in range(n_v):
                 _axpy(-PhiK[k, i, c], v[k, c], row)
         d, ahead = ahead, d
-    fir(ar, out)
 
 
 @jit
