@@ -16,9 +16,16 @@ from estimators.diagnosis.hypotheses import (
     _targets,
     spectral_peak,
 )
-from estimators.diagnosis.residuals import denoised, estimate, model_noise_spread
+from estimators.diagnosis.residuals import (
+    AugmentedDynamics,
+    Forcing,
+    denoised,
+    estimate,
+    model_noise_spread,
+)
 from estimators.diagnosis.synthetic import SEA, synthesize, typical_effect
 from marine_envs.models import get_model
+from marine_envs.models.effects import Effect, ModelWithEffects
 
 
 def _forcing(residuals, state):
@@ -203,3 +210,37 @@ def test_a_measured_disturbance_is_cleared_of_its_sensor_noise():
     cleared = denoised(np.c_[read, current])
     assert np.std(cleared[:, 0] - current) < 0.4 * np.std(read - current)
     assert np.std(cleared[:, 1] - current) < 0.1 * np.std(current)  # a clean one is kept
+
+
+def _augmented(model):
+    """The filter's dynamics with an own forcing on two equations and both wind channels,
+    the first with a steady part."""
+    own = [Forcing(0, 2.0, 0.1), Forcing(2, 5.0, 0.2)]
+    environment = [Forcing(None, 30.0, 1.0, 0, (0, 1), 4.0), Forcing(None, 20.0, 1.0, 1, (0, 1))]
+    return AugmentedDynamics(model, own, environment)
+
+
+@pytest.mark.parametrize("forcing", [True, False])
+def test_compiled_filter_dynamics_equal_their_numpy_reference(forcing):
+    rng = np.random.default_rng(5)
+    model = get_model("hovercraft")
+    f = _augmented(model) if forcing else AugmentedDynamics(model, [], [])
+    assert f._kernel is not None  # the compiled path is the one tested
+    z = rng.normal(size=(9, f.width)) * np.concatenate([np.abs(model.x0) + 1.0,
+                                                        np.ones(f.width - 6)])
+    u = model.u0 + rng.normal(size=(9, len(model.input_names)))
+    got, want = f(z, u, np.zeros((9, 0))), f.reference(z, u)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    if forcing:  # the forcings reach their equations and decay; the steady part is constant
+        assert np.all(want[:, 6:10] == -z[:, 6:10] / f.tau) and not want[:, 10].any()
+    else:
+        np.testing.assert_array_equal(want, model.rhs(z, u))
+
+
+def test_filter_dynamics_of_a_model_without_compiled_equations_take_the_numpy_path():
+    rng = np.random.default_rng(6)
+    model = ModelWithEffects(get_model("hovercraft"), [Effect("current", "r", {"b": 0.01})])
+    f = _augmented(model)
+    assert f._kernel is None
+    z, u = rng.normal(size=(4, f.width)), rng.normal(size=(4, len(model.input_names)))
+    np.testing.assert_array_equal(f(z, u, np.zeros((4, 0))), f.reference(z, u))

@@ -178,10 +178,11 @@ def state_families(res: Residuals) -> Iterator[Family]:
 
 
 def change_families(res: Residuals, margin: float = 0.05, times: FloatArray | None = None,
-                    target: str | None = None) -> Iterator[Family]:
+                    target: str | None = None, what: str | None = None) -> Iterator[Family]:
     """A step change, at one of ``times`` (default: ``CHANGE_TIMES`` over the record but its
-    ends), of the damping (``c * x_t``) or of a constant force in one equation (``target``'s,
-    default: every observable state's)."""
+    ends), of the damping (``c * x_t``) or of a constant force (``what``: ``"damping"`` or
+    ``"force"``, default both) in one equation (``target``'s, default: every observable
+    state's)."""
     x, t = midpoint_states(res), res.time
     n = len(res.model.state_names)
     if times is None:
@@ -192,11 +193,11 @@ def change_families(res: Residuals, margin: float = 0.05, times: FloatArray | No
     for i in _targets(res):
         if target is not None and res.model.state_names[i] != target:
             continue
-        for what, regressor in (("damping", x[:, i]), ("force", np.ones(len(t)))):
-            if what == "damping" and i in kinematic:
-                continue
+        for kind, regressor in (("damping", x[:, i]), ("force", np.ones(len(t)))):
+            if (kind == "damping" and i in kinematic) or what not in (kind, None):
+                continue  # (a family is tens of MB: build only the one asked for)
             yield Family("parameter_change", res.model.state_names[i],
-                         [{"time": float(s), "what": what} for s in times],
+                         [{"time": float(s), "what": kind} for s in times],
                          _in_equation(i, after * regressor[:, None], n), n_parameters=2,
                          details={"times": times})
 

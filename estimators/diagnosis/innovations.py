@@ -14,6 +14,9 @@ sea stays in the filter's process noise instead of swamping the comparison, and 
 hypothesis is a least-squares fit of ``g`` to ``nu``: this is the prediction-error method
 (Ljung) linearised about the nominal filter. Everything is whitened by the innovation
 covariance ``S_k``, so a unit of ``nu`` means the same on every channel.
+
+The recursions run compiled (:func:`response_loop`, :func:`shift_loop`, :func:`fir`): a search
+asks for the response of hundreds of candidate terms over the whole record.
 """
 
 from __future__ import annotations
@@ -23,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, ndimage, signal
+
+from marine_envs.compiled import jit
 
 from ..ekf import ExtendedKalmanFilter, FilterResult
 
@@ -46,12 +51,6 @@ def _ar_fit(x: FloatArray, order: int, segment: int = 512) -> FloatArray:
     acov = np.fft.irfft(background)[:order + 1]
     a = linalg.solve_toeplitz(acov[:order], acov[1:])
     return np.concatenate([[1.0], -a])
-
-
-def _moving_average(a: FloatArray, x: FloatArray) -> FloatArray:
-    """``sum_i a_i x_{k-i}`` along axis 0 from rest (one lfilter call: faster than a sum per
-    lag once the AR filter is long)."""
-    return signal.lfilter(a, [1.0], x, axis=0)
 
 
 @dataclass
@@ -83,6 +82,12 @@ class Innovations:
     ar: FloatArray | None = None
     n_model: int | None = None
 
+    def __post_init__(self) -> None:
+        # the one layout the loops are compiled for (the filter's arrays are views: strided,
+        # broadcast, read-only)
+        for name in ("M", "Gamma", "PhiK", "H", "L_inv", "K", "H_raw", "Phi", "C"):
+            setattr(self, name, c_array(getattr(self, name)))
+
     @classmethod
     def from_filter(cls, ekf: ExtendedKalmanFilter, run: FilterResult, u: FloatArray,
                     n_model: int | None = None) -> Innovations:
@@ -113,23 +118,22 @@ class Innovations:
         return out
 
     def _whiten(self, x: FloatArray) -> FloatArray:
-        """Each channel through its prediction-error filter (axis 0 is time)."""
+        """Each channel through its prediction-error filter (axis 0 is time, axis 1 the
+        channel; ``(T, m)`` or ``(T, m, R)``)."""
         if self.ar is None:
             return x
-        out = np.empty_like(x)
-        for j, a in enumerate(self.ar):
-            out[:, j] = _moving_average(a, x[:, j])
-        return out
+        out = c_array(x.reshape(x.shape[0], x.shape[1], -1), copy=True)
+        fir(c_array(self.ar), out)
+        return out.reshape(x.shape)
+
+    def _taps(self) -> FloatArray:
+        """The prediction-error filters ``(m, p + 1)``; a unit tap without them."""
+        return np.ones((self.nu.shape[1], 1)) if self.ar is None else c_array(self.ar)
 
     @property
     def shape(self) -> tuple[int, int, int]:
         """``(T, m, n)``: steps, channels, the filter's states."""
         return self.nu.shape[0], self.nu.shape[1], self.M.shape[1]
-
-    def _pad(self, w: FloatArray) -> FloatArray:
-        """A term in the model's equations ``(T, n_model, ...)`` as one in the filter's."""
-        extra = self.M.shape[1] - w.shape[1]
-        return np.pad(w, [(0, 0), (0, extra)] + [(0, 0)] * (w.ndim - 2)) if extra else w
 
     def smoothed_shift(self, w: FloatArray | None = None,
                        v: FloatArray | None = None) -> FloatArray:
@@ -138,33 +142,123 @@ class Innovations:
         filter's shift (as in :meth:`response`), then the Rauch-Tung-Striebel recursion;
         the model's states only ``(T, n_model)``."""
         T, m, n = self.shape
-        w = np.zeros((T, n)) if w is None else self._pad(w)
-        v = np.zeros((T, m)) if v is None else v
-        before, after = np.zeros((T, n)), np.zeros((T, n))
-        for k in range(T):
-            after[k] = before[k] - self.K[k] @ (self.H_raw[k] @ before[k] + v[k])
-            if k < T - 1:
-                before[k + 1] = self.Phi[k] @ after[k] + self.Gamma[k] @ w[k]
-        smoothed = after.copy()
-        for k in range(T - 2, -1, -1):
-            smoothed[k] = after[k] + self.C[k] @ (smoothed[k + 1] - before[k + 1])
+        w = np.zeros((T, 0)) if w is None else c_array(w)
+        v = np.zeros((T, m)) if v is None else c_array(v)
+        smoothed = np.empty((T, n))
+        shift_loop(self.K, self.H_raw, self.Phi, self.Gamma, self.C, w, v, smoothed)
         return smoothed[:, :self.n_model]
 
     def response(self, w: FloatArray | None = None, v: FloatArray | None = None) -> FloatArray:
         """Whitened innovation change per unit coefficient ``(T, m, R)`` of ``R`` candidate
         terms: ``w`` ``(T, n, R)`` added to the state derivatives (state units per second),
         ``v`` ``(T, m, R)`` added to the measured channels (channel units)."""
-        T, m, n = self.shape
+        T, m, _ = self.shape
         R = (w if w is not None else v).shape[2]  # type: ignore[union-attr]
-        drive = np.zeros((T - 1, n, R))
-        if w is not None:
-            drive += self.Gamma @ self._pad(w)[:-1]
-        if v is not None:
-            drive -= self.PhiK @ v[:-1]
-        d = np.zeros((T, n, R))
-        for k in range(T - 1):
-            d[k + 1] = self.M[k] @ d[k] + drive[k]
-        g = self.H @ d
-        if v is not None:
-            g += self.L_inv @ v
-        return self._whiten(g)
+        w = np.zeros((T, 0, R)) if w is None else c_array(w)
+        v = np.zeros((T, 0, R)) if v is None else c_array(v)
+        out = np.empty((T, m, R))
+        response_loop(self.M, self.Gamma, self.PhiK, self.H, self.L_inv, w, v, self._taps(),
+                      out)
+        return out
+
+
+def c_array(a: FloatArray, copy: bool = False) -> FloatArray:
+    """``a`` as a writable C-contiguous float64 array (a copy if it is not one, or asked): the
+    one layout the compiled loops are compiled for."""
+    usable = a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable
+    return a if usable and not copy else np.array(a, dtype=np.float64, order="C")
+
+
+# -- the compiled loops ---------------------------------------------------------------------------
+@jit
+def response_loop(M, Gamma, PhiK, H, L_inv, w, v, ar, out):
+    """:meth:`Innovations.response` written to ``out`` ``(T, m, R)``: ``d_{k+1} = M_k d_k +
+    Gamma_k w_k - PhiK_k v_k`` from ``d_0 = 0``, ``g_k = H_k d_k + L_inv_k v_k``, each channel
+    through its filter ``ar`` (:func:`fir`; the last ``g`` kept in a ring, so that ``out`` is
+    written once). ``w`` ``(T, n_w, R)`` enters the first ``n_w`` states; ``v`` ``(T, m, R)``,
+    or ``(T, 0, R)`` for none."""
+    T, m, R = out.shape
+    n, n_w, n_v, taps = M.shape[1], w.shape[1], v.shape[1], ar.shape[1]
+    d, ahead = np.zeros((n, R)), np.empty((n, R))
+    ring = np.empty((taps, m, R))
+    for k in range(T):
+        for j in range(m):
+            g = ring[k % taps, j]
+            g[:] = 0.0
+            for i in range(n):
+                _axpy(H[k, j, i], d[i], g)
+            for c in range(n_v):
+                _axpy(L_inv[k, j, c], v[k, c], g)
+            y = out[k, j]
+            y[:] = 0.0
+            for i in range(min(taps, k + 1)):
+                _axpy(ar[j, i], ring[(k - i) % taps, j], y)
+        if k == T - 1:
+            break
+        for i in range(n):
+            row = ahead[i]
+            row[:] = 0.0
+            for ll in range(n):
+                _axpy(M[k, i, ll], d[ll], row)
+            for ll in range(n_w):
+                _axpy(Gamma[k, i, ll], w[k, ll], row)
+            for c in range(n_v):
+                _axpy(-PhiK[k, i, c], v[k, c], row)
+        d, ahead = ahead, d
+
+
+@jit
+def shift_loop(K, H, Phi, Gamma, C, w, v, out):
+    """:meth:`Innovations.smoothed_shift` of every filter state written to ``out`` ``(T, n)``:
+    the filter's shift ``a_k = b_k - K_k (H_k b_k + v_k)``, ``b_{k+1} = Phi_k a_k + Gamma_k
+    w_k`` from ``b_0 = 0``, then ``s_k = a_k + C_k (s_{k+1} - b_{k+1})``. ``w`` ``(T, n_w)``
+    enters the first ``n_w`` states, ``v`` ``(T, m)``."""
+    T, n = out.shape
+    m, n_w = H.shape[1], w.shape[1]
+    before, after = np.zeros((T, n)), np.empty((T, n))
+    seen, step = np.empty(m), np.empty(n)
+    for k in range(T):
+        for j in range(m):
+            seen[j] = v[k, j] + _dot(H[k, j], before[k])
+        for i in range(n):
+            after[k, i] = before[k, i] - _dot(K[k, i], seen)
+        if k < T - 1:
+            for i in range(n):
+                before[k + 1, i] = _dot(Phi[k, i], after[k]) + _dot(Gamma[k, i, :n_w], w[k])
+    out[T - 1] = after[T - 1]
+    for k in range(T - 2, -1, -1):
+        for i in range(n):
+            step[i] = out[k + 1, i] - before[k + 1, i]
+        for i in range(n):
+            out[k, i] = after[k, i] + _dot(C[k, i], step)
+
+
+@jit
+def fir(a, x):
+    """Each channel ``j`` of ``x`` ``(T, m, R)`` through its filter ``a[j]``, in place:
+    ``x_k <- sum_i a_ji x_{k-i}`` from rest (latest sample first, so the older ones it reads
+    are still the inputs)."""
+    T, m, R = x.shape
+    total = np.empty(R)
+    for k in range(T - 1, -1, -1):
+        for j in range(m):
+            total[:] = 0.0
+            for i in range(min(a.shape[1], k + 1)):
+                _axpy(a[j, i], x[k - i, j], total)
+            x[k, j] = total
+
+
+@jit
+def _axpy(c, x, y):
+    """``y += c x`` (1-D)."""
+    for r in range(y.size):
+        y[r] += c * x[r]
+
+
+@jit
+def _dot(a, b):
+    """``sum a_i b_i`` (1-D)."""
+    total = 0.0
+    for i in range(a.size):
+        total += a[i] * b[i]
+    return total

@@ -25,20 +25,23 @@ depends on the state, which an additive forcing cannot mimic.
 
 from __future__ import annotations
 
+import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, ndimage, signal
 
+from marine_envs.compiled import jit
 from marine_envs.models import VehicleModel
 from marine_envs.models.integrate import rk4
 from marine_envs.recording import Recording
 
 from ..ekf import ExtendedKalmanFilter
-from .innovations import Innovations
+from .innovations import Innovations, c_array
 
 FloatArray = NDArray[np.float64]
 #: Channels that are angles: unwrapped before smoothing.
@@ -407,44 +410,109 @@ def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatA
     them, the ``forcing`` states (zero mean, their stationary variance as prior): the
     equations' own forcings, the environment's channels, then the steady parts of those that
     have one (constants)."""
-    if not forcing:
-        return ExtendedKalmanFilter.from_model(model, dt, measured=channels, Q=np.diag(q),
-                                               R=np.diag(noise**2), x0=x0, P0=P0,
-                                               substeps=substeps)
     n = len(model.state_names)
     own, environment = _split(forcing)
     forcing = own + environment
-    rows = np.array([f.state for f in own], dtype=int)
-    channels_d = np.array([f.disturbance for f in environment], dtype=int)
     steady = [f for f in environment if f.steady > 0]
-    channels_s = np.array([f.disturbance for f in steady], dtype=int)
     tau = np.array([f.tau for f in forcing])
     variance = np.array([f.variance for f in forcing])
     outputs = [model.output_names.index(c) for c in channels]
-    n_d, n_f = len(model.disturbance_names), n + len(forcing)
-
-    def f(z: FloatArray, u: FloatArray, _theta: FloatArray) -> FloatArray:
-        d = np.zeros((len(z), n_d))
-        d[:, channels_d] = z[:, n + len(rows):n_f]
-        d[:, channels_s] += z[:, n_f:]
-        x_dot = model.rhs(z[:, :n], u, d)
-        x_dot[:, rows] += z[:, n:n + len(rows)]
-        return np.concatenate([x_dot, -z[:, n:n_f] / tau, np.zeros((len(z), len(steady)))],
-                              axis=1)
-
-    def h(z: FloatArray) -> FloatArray:
-        return model.output(z[:, :n])[:, outputs]
+    if not forcing and model.output_names == model.state_names:
+        h: Any = np.eye(n)[outputs]  # a matrix, as ExtendedKalmanFilter.from_model's
+    else:
+        def h(z: FloatArray) -> FloatArray:
+            return model.output(z[:, :n])[:, outputs]
 
     decay = np.exp(-2 * dt / tau)
     Q = np.diag(np.concatenate([q, variance * (1 - decay), np.zeros(len(steady))]))
-    names = ([f"forcing_{model.state_names[i]}" for i in rows]
-             + [model.disturbance_names[c] for c in channels_d]
-             + [f"steady_{model.disturbance_names[c]}" for c in channels_s])
+    dynamics = AugmentedDynamics(model, own, environment)
+    names = ([f"forcing_{model.state_names[i]}" for i in dynamics.rows]
+             + [model.disturbance_names[c] for c in dynamics.channels]
+             + [f"steady_{model.disturbance_names[c]}" for c in dynamics.steady])
     prior = np.concatenate([variance, [f.steady for f in steady]])
-    return ExtendedKalmanFilter(f, h, dt=dt, Q=Q, R=np.diag(noise**2), n_inputs=len(
-        model.input_names), state_names=(*model.state_names, *names), measurement_names=channels,
-        x0=np.concatenate([x0, np.zeros(len(prior))]),
+    return ExtendedKalmanFilter(
+        dynamics, h, dt=dt, Q=Q, R=np.diag(noise**2), n_inputs=len(model.input_names),
+        state_names=(*model.state_names, *names),
+        measurement_names=channels, x0=np.concatenate([x0, np.zeros(len(prior))]),
         P0=linalg.block_diag(P0, np.diag(prior)), substeps=substeps)
+
+
+class AugmentedDynamics:
+    """The filter's dynamics ``f(z, u, theta) -> z_dot`` (rows of ``z``: the model's states,
+    then its forcing states, :func:`_filter`): the model's equations with the equations' own
+    forcings added and the environment's channels (plus their steady parts) as its
+    disturbances; each forcing a first-order Gauss-Markov process, a steady part constant.
+
+    Compiled (:func:`augmented_rows`) for a model with compiled equations (the filter calls it
+    at every RK4 stage and for every Jacobian, on a few rows, where a numpy call costs mostly
+    its overhead); numpy (:meth:`reference`) for any other.
+
+    :param own: the equations' own forcings (``Forcing.state`` set), in the filter's order.
+    :param environment: the environment's channels (``Forcing.disturbance`` set).
+    """
+
+    def __init__(self, model: VehicleModel, own: Sequence[Forcing],
+                 environment: Sequence[Forcing]) -> None:
+        self.model, self.n, self.n_d = model, len(model.state_names), len(model.disturbance_names)
+        self.rows = np.array([f.state for f in own], dtype=np.int64)
+        self.channels = np.array([f.disturbance for f in environment], dtype=np.int64)
+        self.steady = np.array([f.disturbance for f in environment if f.steady > 0],
+                               dtype=np.int64)
+        self.tau = np.array([f.tau for f in (*own, *environment)], dtype=np.float64)
+        self.width = self.n + self.tau.size + self.steady.size
+        compiled = type(model).equations is not None and type(model).rhs is VehicleModel.rhs \
+            and model.constants.ndim == 1
+        self._kernel = augmented_rows(type(model).equations.core) if compiled else None
+        self._p = c_array(model.constants) if compiled else None
+
+    def __call__(self, z: FloatArray, u: FloatArray, _theta: FloatArray) -> FloatArray:
+        """``z_dot`` ``(R, width)`` of states ``z`` ``(R, width)`` with inputs ``u``
+        ``(R, n_u)``."""
+        if self._kernel is None:
+            return self.reference(z, u)
+        out = np.empty((z.shape[0], self.width))
+        self._kernel(c_array(z), c_array(u), self._p, self.rows, self.channels, self.steady,
+                     self.tau, self.n, self.n_d, out)
+        return out
+
+    def reference(self, z: FloatArray, u: FloatArray) -> FloatArray:
+        """:meth:`__call__` in numpy, through ``model.rhs``."""
+        n, n_own, n_f = self.n, self.rows.size, self.n + self.tau.size
+        d = np.zeros((len(z), self.n_d))
+        d[:, self.channels] = z[:, n + n_own:n_f]
+        d[:, self.steady] += z[:, n_f:]
+        x_dot = self.model.rhs(z[:, :n], u, d)
+        x_dot[:, self.rows] += z[:, n:n + n_own]
+        return np.concatenate([x_dot, -z[:, n:n_f] / self.tau,
+                               np.zeros((len(z), self.steady.size))], axis=1)
+
+
+@functools.cache
+def augmented_rows(core: Callable[..., None]) -> Callable[..., None]:
+    """The compiled :class:`AugmentedDynamics` of a model's equations ``core(x, u, d, p,
+    out)`` (:mod:`marine_envs.compiled`): ``f(Z, U, p, rows, channels, steady, tau, n, n_d,
+    OUT)`` on every row of ``Z``; made once per process, compiled once per machine."""
+
+    @jit
+    def augmented(Z, U, p, rows, channels, steady, tau, n, n_d, OUT):
+        n_own, n_f = rows.size, n + tau.size
+        d = np.empty(n_d)
+        for b in range(Z.shape[0]):
+            z, out = Z[b], OUT[b]
+            d[:] = 0.0
+            for j in range(channels.size):
+                d[channels[j]] = z[n + n_own + j]
+            for j in range(steady.size):
+                d[steady[j]] += z[n_f + j]
+            core(z[:n], U[b], d, p, out[:n])
+            for j in range(n_own):
+                out[rows[j]] += z[n + j]
+            for j in range(n, n_f):
+                out[j] = -z[j] / tau[j - n]
+            for j in range(n_f, out.size):
+                out[j] = 0.0
+
+    return augmented
 
 
 def _initial_state(model: VehicleModel, y: FloatArray, channels: tuple[str, ...],

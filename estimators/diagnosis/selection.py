@@ -424,8 +424,7 @@ def _change_fit(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], ta
                 ) -> tuple[FloatArray, FloatArray, FloatArray, Family]:
     """Sums of squares, coefficients and responses of a ``what`` change at each of ``times``,
     and its family."""
-    local = next(f for f in change_families(res, times=times, target=target)
-                 if f.members[0]["what"] == what)
+    local = next(change_families(res, times=times, target=target, what=what))
     G = res.innovations.response(local.w, local.v)  # type: ignore[union-attr]
     sse, coef, _ = evaluator.fit(accepted, G, True, rows)
     return sse, coef, G, local
