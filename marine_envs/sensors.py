@@ -246,22 +246,22 @@ class Delay(Stage):
 
     def bind(self, batch_size: int) -> None:
         self.buf = np.zeros((batch_size, self.length, self.samples.size))
-        #: the slot written last, shared by the boats (an array: the compiled chain moves it)
-        self.head = np.zeros(1, dtype=np.int64)
+        #: each boat's slot written last (per boat: a boat may be measured alone)
+        self.head = np.zeros(batch_size, dtype=np.int64)
         self.fresh = np.ones(batch_size, dtype=bool)
-        self._rows = np.arange(batch_size)[:, None]
+        self._rows = np.arange(batch_size)
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         self.fresh[idx] = True
 
     def __call__(self, z: FloatArray) -> FloatArray:
-        head = self.head[0] = (self.head[0] + 1) % self.length
+        self.head = (self.head + 1) % self.length
         if self.fresh.any():
             self.buf[self.fresh] = z[self.fresh, None, :]
             self.fresh[:] = False
-        self.buf[:, head] = z
-        slots = (head - self.samples) % self.length
-        return self.buf[self._rows, slots[None, :], self._channels[None, :]]
+        self.buf[self._rows, self.head] = z
+        slots = (self.head[:, None] - self.samples[None, :]) % self.length
+        return self.buf[self._rows[:, None], slots, self._channels[None, :]]
 
 
 class SampleHold(Stage):
@@ -502,7 +502,7 @@ class CompiledChain:
         self._none_i = np.zeros(batch_size, dtype=np.int64)
         self._none_b = np.zeros(batch_size, dtype=np.bool_)
         self._none3 = np.zeros((batch_size, 1, 0))
-        self._none_head = np.zeros(1, dtype=np.int64)
+        self.boats = np.arange(batch_size, dtype=np.int64)  # every boat, for measure_chain
 
     def begin(self) -> tuple:
         """Start a measurement: the arrays :func:`measure_chain` reads and updates, after the
@@ -516,7 +516,7 @@ class CompiledChain:
             self.hold.count[:, 0] if self.hold else empty_i,
             self.hold.last if self.hold else empty2,
             self.delay.buf if self.delay else self._none3,
-            self.delay.head if self.delay else self._none_head,
+            self.delay.head if self.delay else empty_i,
             self.delay.fresh if self.delay else empty_b,
             dropout.rows if dropout else empty2, dropout.cursor if dropout else empty_i,
             self.dropout.last if self.dropout else empty2,
@@ -539,28 +539,28 @@ class CompiledChain:
         """Measurements and valid channels (batch x channels) of true values ``z``."""
         y = np.empty_like(z)
         valid = np.empty(z.shape, dtype=np.bool_)
-        measure_chain(np.ascontiguousarray(z, dtype=float), *self.configuration(), *self.begin(),
-                      y, valid)
+        measure_chain(self.boats, np.ascontiguousarray(z, dtype=float), *self.configuration(),
+                      *self.begin(), y, valid)
         self.end()
         self.valid = valid
         return y, valid
 
 
 @jit(inline="never")  # once per measurement: compiled once, not into every caller
-def measure_chain(z, bias, wrap, mu, group, zoom_settings, limit, period, lag, prob,
+def measure_chain(boats, z, bias, wrap, mu, group, zoom_settings, limit, period, lag, prob,
                   noisy, zooming, holding, delaying, dropping,
                   noise_rows, noise_cursor, zoom_mu, count, held, buf, head, delay_fresh,
                   dropout_rows, dropout_cursor, kept, dropout_fresh, y, valid):
-    """The standard chain (:meth:`SensorSuite.standard`, module docstring) on true values ``z``
-    (batch x channels), every boat in turn: measurements to ``y``, fresh samples to ``valid``.
-    Row ``cursor[b]`` of a random stream is boat b's current draw; the cursors advance by one."""
-    n_boats, m = z.shape
-    if delaying:  # the slot to write, shared by the boats
-        head[0] = (head[0] + 1) % buf.shape[1]
-    for b in range(n_boats):
-        row = y[b]
+    """The standard chain (:meth:`SensorSuite.standard`, module docstring) of boats ``boats``
+    (row r of the true values ``z`` is boat ``boats[r]``'s), boat by boat: measurements to ``y``,
+    fresh samples to ``valid`` (rows as ``z``); only those boats' sensors advance. Row
+    ``cursor[b]`` of a random stream is boat b's current draw; the cursors advance by one."""
+    m = z.shape[1]
+    for r in range(boats.size):
+        b = boats[r]
+        row = y[r]
         for c in range(m):
-            a = z[b, c] + bias[c]
+            a = z[r, c] + bias[c]
             if noisy:
                 a += noise_rows[noise_cursor[b], c]
             if wrap[c]:  # pi - ((pi - a) mod 2 pi) lies in (-pi, pi]
@@ -583,28 +583,29 @@ def measure_chain(z, bias, wrap, mu, group, zoom_settings, limit, period, lag, p
                     held[b, c] = a
                 a = held[b, c]
             row[c] = a
-            valid[b, c] = fresh
+            valid[r, c] = fresh
         if holding:
             count[b] += 1
         if noisy:
             noise_cursor[b] += 1
         if delaying:
             length = buf.shape[1]
+            head[b] = (head[b] + 1) % length
             for c in range(m):
                 if delay_fresh[b]:  # the line starts full of the first measurement
                     for slot in range(length):
                         buf[b, slot, c] = row[c]
-                buf[b, head[0], c] = row[c]
+                buf[b, head[b], c] = row[c]
             delay_fresh[b] = False
             for c in range(m):
-                row[c] = buf[b, (head[0] - lag[c]) % length, c]
+                row[c] = buf[b, (head[b] - lag[c]) % length, c]
         if dropping:
             for c in range(m):
                 arrived = dropout_rows[dropout_cursor[b], c] >= prob[c] or dropout_fresh[b]
                 if arrived:
                     kept[b, c] = row[c]
                 row[c] = kept[b, c]
-                valid[b, c] = valid[b, c] and arrived
+                valid[r, c] = valid[r, c] and arrived
             dropout_fresh[b] = False
             dropout_cursor[b] += 1
 

@@ -155,6 +155,27 @@ def test_the_step_kernel_equals_the_numpy_path_over_episodes_and_resets(env_id):
     assert ended >= 3  # resets were exercised
 
 
+@pytest.mark.parametrize("env_id", ["marine_envs/USV-v0", "marine_envs/DPVessel-v0"])
+def test_a_boat_restarted_between_steps_continues_as_a_single_env_reset_there(env_id):
+    kw = {k: v for k, v in BUSY[env_id].items() if k != "max_roll"}  # no episode ends
+    vector = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point", **kw)
+    single = gym.make(env_id, **kw)
+    vector.reset(seed=5)
+    single.reset(seed=6)  # boat 1 of the vector env
+    rng = np.random.default_rng(3)
+    for step in range(300):
+        action = rng.uniform(-0.2, 0.2, vector.action_space.shape).astype(np.float32)
+        if step == 120:  # boat 1 restarts now (as SB3 resets a finished env); its sensors alone
+            obs, _ = vector.restart(np.array([1]))
+            obs_single, _ = single.reset()
+            np.testing.assert_array_equal(obs[0], obs_single)
+            continue
+        obs, *_, info = vector.step(action)
+        obs_single, *_, info_single = single.step(action[1])
+        np.testing.assert_array_equal(obs[1], obs_single, err_msg=f"step {step}")
+        np.testing.assert_array_equal(info["state"][1], info_single["state"])
+
+
 def test_a_diverging_boat_is_named_and_the_step_not_taken():
     env = gym.make_vec("marine_envs/Hydrofoil-v0", num_envs=3,
                        vectorization_mode="vector_entry_point")

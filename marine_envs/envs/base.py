@@ -200,14 +200,12 @@ class MarineVectorEnv(VectorEnv):
         """Start new episodes of boats ``idx`` now rather than on the next step (the
         same-step reset SB3 expects); their episode generators carry on, as a single env's
         do across resets. Returns their first measurements ``(len(idx), m)`` and the valid
-        channels. Measuring is batched, so they come from a copy of the sensor chain (the
-        other boats' sensors must not advance); the restarted boats' own chain then takes
-        its first sample one step late: statistically the same, not the same draws."""
+        channels, taken by those boats' sensors alone (:meth:`Simulator.measure_boats`)."""
         idx = np.asarray(idx, dtype=np.intp)
         self.sim.reset(idx, [self._rngs[i] for i in idx])
         self._done[idx] = False
-        y, valid = self.sim.measure_detached()
-        return y[idx].astype(np.float32), np.broadcast_to(valid, y.shape)[idx]
+        y, valid = self.sim.measure_boats(idx)
+        return y.astype(np.float32), valid
 
     def _info(self) -> dict[str, Any]:
         sim, m = self.sim, self._mask

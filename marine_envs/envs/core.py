@@ -279,17 +279,21 @@ class Simulator:
         reward, failed = self.advance()
         return (self.measure() if measure else None), reward, failed
 
-    def measure_detached(self) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """Measurements and valid channels of every boat from a copy of the sensors, whose own
-        state does not advance (for restarting some boats between steps)."""
-        saved = self.sensors, self._compiled
-        self.sensors = copy.deepcopy(self.sensors)
+    def measure_boats(self, idx: NDArray[np.intp]) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Measurements and valid channels of boats ``idx`` alone (the other boats' sensors do
+        not advance; for restarting some boats between steps). Compiled, those boats' own
+        sensors take the sample, as a single environment's would; in numpy, a copy of the
+        chain measures every boat (statistically the same: the restarted boats' own chain
+        then takes its first sample one step late)."""
+        idx = np.asarray(idx, dtype=np.intp)
         if self._compiled is not None:
-            self._compiled = CompiledStep.of(self)
+            return self._compiled.measure(self.x[idx], idx)
+        sensors, self.sensors = self.sensors, copy.deepcopy(self.sensors)
         try:
-            return self.measure(), self.valid
+            y, valid = self.measure(), self.sensors.valid
         finally:
-            self.sensors, self._compiled = saved
+            self.sensors = sensors
+        return y[idx], np.broadcast_to(valid, y.shape)[idx]
 
     @property
     def valid(self) -> NDArray[np.bool_]:
@@ -393,7 +397,7 @@ class Simulator:
     def measure(self) -> FloatArray:
         """Sensor outputs (batch x channels) of the current states."""
         if self._compiled is not None:
-            return self._compiled.measure(self.x)
+            return self._compiled.measure(self.x)[0]
         outputs = self.x if self._outputs_are_states else self.model.output(self.x)
         true = outputs[:, self.measured]
         if self.effects:

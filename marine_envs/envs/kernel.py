@@ -31,8 +31,8 @@ from ..sensors import CompiledChain, measure_chain
 #: The fields of a :class:`KernelState`: the dynamics, then the sensor chain's configuration and
 #: its state (:meth:`CompiledChain.configuration`, :meth:`CompiledChain.begin`).
 DYNAMICS = ("p", "h", "substeps", "mid", "scale", "allocation", "allocated", "weights",
-            "reference", "limited", "low", "high", "output_map", "steps", "streamed", "d_rows",
-            "d_cursor")
+            "reference", "limited", "low", "high", "output_map", "steps", "boats", "streamed",
+            "d_rows", "d_cursor")
 CHAIN = ("bias", "wrap", "mu", "group", "zoom_settings", "limit", "period", "lag", "prob",
          "noisy", "zooming", "holding", "delaying", "dropping",
          "noise_rows", "noise_cursor", "zoom_mu", "count", "held", "buf", "head", "delay_fresh",
@@ -148,7 +148,7 @@ def step_kernel(integrate: Callable[..., None]) -> Callable[..., int]:
             failed[b] = exceeded
             st.steps[b] += 1
         if measure:
-            refill = measure_boats(st, x_out, y, valid) or refill
+            refill = measure_boats(st, st.boats, x_out, y, valid) or refill
         return REFILL if refill else STEPPED
 
     return step
@@ -182,18 +182,19 @@ def _reward(st, x, u, d):
 
 
 @jit(inline="never")  # once per step: compiled once, not into every caller
-def measure_boats(st, x, y, valid):
-    """The sensors' measurements ``y`` and valid channels of states ``x`` (every boat); True
-    when a sensor's random stream used up a boat's block."""
+def measure_boats(st, boats, x, y, valid):
+    """The sensors' measurements ``y`` and valid channels of boats ``boats`` (row r of states
+    ``x``, ``y`` and ``valid`` is boat ``boats[r]``'s); only their sensors advance. True when a
+    sensor's random stream used up a boat's block."""
     m = y.shape[1]
-    z = np.empty((x.shape[0], m))
-    for b in range(x.shape[0]):
+    z = np.empty((boats.size, m))
+    for r in range(boats.size):
         for c in range(m):
             total = 0.0
             for k in range(x.shape[1]):
-                total += st.output_map[c, k] * x[b, k]
-            z[b, c] = total
-    measure_chain(z, st.bias, st.wrap, st.mu, st.group, st.zoom_settings, st.limit, st.period,
+                total += st.output_map[c, k] * x[r, k]
+            z[r, c] = total
+    measure_chain(boats, z, st.bias, st.wrap, st.mu, st.group, st.zoom_settings, st.limit, st.period,
                   st.lag, st.prob, st.noisy, st.zooming, st.holding, st.delaying, st.dropping,
                   st.noise_rows, st.noise_cursor, st.zoom_mu, st.count, st.held, st.buf, st.head,
                   st.delay_fresh, st.dropout_rows, st.dropout_cursor, st.kept, st.dropout_fresh,
@@ -301,7 +302,7 @@ class CompiledStep:
             sim._weights.copy(),
             np.zeros(sim._weights.size) if sim._reference is None else sim._reference,
             sim._limited_list.astype(np.int64), sim._low[0].copy(), sim._high[0].copy(),
-            self.outputs, sim.steps, stream is not None,
+            self.outputs, sim.steps, self.chain.boats, stream is not None,
             np.zeros((1, 1)) if stream is None else stream.rows,
             np.zeros(1, dtype=np.int64) if stream is None else stream.cursor,
             *self.chain.configuration(), *self.chain.begin())
@@ -336,14 +337,19 @@ class CompiledStep:
             self.chain.valid = valid
         return (y if measure else None), reward, failed
 
-    def measure(self, x: np.ndarray) -> np.ndarray:
-        """:meth:`Simulator.measure` of states ``x``."""
-        y = np.empty(self.measured_shape)
+    def measure(self, x: np.ndarray, boats: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Measurements and valid channels of boats ``boats`` (default: every boat; then they
+        are the chain's :attr:`~CompiledChain.valid`) of their states ``x``."""
+        every = boats is None
+        boats = self.chain.boats if every else np.asarray(boats, dtype=np.int64)
+        y = np.empty((boats.size, self.measured_shape[1]))
         valid = np.empty(y.shape, dtype=bool)
-        if measure_boats(self.state, np.ascontiguousarray(x, dtype=float), y, valid):
+        if measure_boats(self.state, boats, np.ascontiguousarray(x, dtype=float), y, valid):
             self.refill()
-        self.chain.valid = valid
-        return y
+        if every:
+            self.chain.valid = valid
+        return y, valid
 
     def streams(self) -> list:
         """The block streams the kernel reads: sensor noise, dropout, disturbances."""

@@ -285,14 +285,18 @@ class WaveRealisation(BlockSource):
                 values = values * self.sea.hs(times)[:, :, None]  # type: ignore[operator]
         else:
             # boats whose blocks start at the same time share the Hs-shaped weights: one real
-            # matrix product per start time
-            values = np.empty((k, BLOCK, c))
+            # matrix product per start time, compiled (single-threaded: a BLAS product of one
+            # boat's phasors waits for its threads whenever another job holds a core)
+            values = np.empty((k, BLOCK * c))
             starts, group = np.unique(self.block_time[idx], return_inverse=True)
             for g, start in enumerate(starts):
                 members = np.flatnonzero(group == g)
                 phasors = self.phasor[idx[members]]
-                values[members] = (np.hstack([phasors.real, phasors.imag])
-                                   @ self._shaped_weights(float(start))).reshape(-1, BLOCK, c)
+                block = np.empty((members.size, BLOCK * c))
+                _weighted(np.hstack([phasors.real, phasors.imag]),
+                          self._shaped_weights(float(start)), block)
+                values[members] = block
+            values = values.reshape(k, BLOCK, c)
         self.phasor[idx] *= self._block_rotation
         self.block_time[idx] += BLOCK * self.dt
         return values
@@ -342,3 +346,16 @@ def _shaped_weights(rotation_re, rotation_im, table_re, table_im, j, w, out):
                 g_im = keep * table_im[i, row, k] + weight * table_im[i, row + 1, k]
                 out[i, t * c + k] = r_re * g_re - r_im * g_im
                 out[n + i, t * c + k] = -(r_re * g_im + r_im * g_re)
+
+
+@jit
+def _weighted(phasors, weights, out):
+    """``out = phasors @ weights`` row by row, each sum in the order of the components (the
+    inner loop runs along a row of ``weights``: it vectorises)."""
+    for r in range(phasors.shape[0]):
+        for col in range(out.shape[1]):
+            out[r, col] = 0.0
+        for i in range(phasors.shape[1]):
+            a = phasors[r, i]
+            for col in range(out.shape[1]):
+                out[r, col] += a * weights[i, col]
