@@ -239,7 +239,7 @@ class ExtendedKalmanFilter(Estimator):
         if compiled and own and ekf._H is not None:
             dynamics = compiled_dynamics(model, parameters)
             if dynamics is not None:
-                ekf._compiled = CompiledFilter(dynamics, rows, ekf.R)
+                ekf._compiled = CompiledFilter(dynamics, rows, n_d)
         return ekf
 
     @classmethod
@@ -332,9 +332,9 @@ class ExtendedKalmanFilter(Estimator):
     def predict(self, u: ArrayLike, dt: float | None = None) -> FloatArray:
         u, dt = self._input(u, dt)
         if self._compiled is not None:
-            d = np.broadcast_to(self.disturbance, (self.batch_size, self.disturbance.shape[-1]))
             Q = (self.Q + self.Q.T) * (0.5 * dt / self.dt)  # symmetric, as P's halves are
-            self.x, self.P, T = self._compiled.predict(self.x, self.P, u, d, dt, self.substeps, Q,
+            self.x, self.P, T = self._compiled.predict(self.x, self.P, u, self.disturbance, dt,
+                                                       self.substeps, Q,
                                                        self.parameter_noise**2 * dt)
             self._transition_model_rows, self._transition = T, None
             return self.x
@@ -355,7 +355,8 @@ class ExtendedKalmanFilter(Estimator):
         y, valid = check_measurement(y, mask, self.measurement_names, self.batch_size)
         if self._compiled is not None:  # H selects states: y_hat = x[measured]
             e = self._innovation(y, self.x[:, self._compiled.measured], valid)
-            self.x, self.P, S, nis, healthy = self._compiled.update(self.x, self.P, e, valid)
+            self.x, self.P, S, nis, healthy = self._compiled.update(self.x, self.P, e, valid,
+                                                                    self.R)
             self.innovation, self.innovation_cov, self.nis = e, S, nis
             self.dof = valid.sum(axis=1)
             self._check_health(healthy)

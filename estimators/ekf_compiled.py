@@ -9,11 +9,12 @@ that path spends on structure it does not see:
 * the parameters' Jacobian exact (:func:`coefficient_dynamics`);
 * the model rows ``[Phi_x, Gamma]`` of the transition from a degree-16 Taylor polynomial
   evaluated by Paterson-Stockmeyer (6 products of ``n x n`` matrices and one of ``n x (n + p)``
-  instead of 7 of ``n x (n + p)``), scaled by a sharper norm: no squaring where the numpy path
-  takes 5 (:func:`transition_rows`);
+  instead of 7 of ``n x (n + p)``), scaled by a sharper norm: on the EKF benchmark's record no
+  squaring where the numpy path takes 5 (:func:`transition_rows`);
 * the update with ``H`` a selection of states: ``C = P H'`` is columns of ``P``, ``H P H'``
-  entries of it, and with ``S = L L'`` the update is ``P - W W'``, ``W = C L^-T`` (the Joseph
-  form of the gain ``K = W L^-1``, to rounding; :func:`update`);
+  entries of it, the gain from the Cholesky factor of ``H P H' + R``, and the covariance
+  ``P - W W'``, the Joseph form's to rounding, or the Joseph form itself where that rounding
+  would matter (:func:`update`);
 * one symmetric half of each covariance computed, the other mirrored.
 
 The dynamics a kernel integrates and differences are the model's own compiled equations
@@ -45,6 +46,9 @@ ORDER, NORM = 16, 1.2
 BOUND = 5.0
 #: Coefficients of ``g(X) = sum_k X**k / (k + 1)!``, ``k < ORDER``: ``exp(X) = I + g(X) X``.
 _G = tuple(1.0 / math.factorial(k + 1) for k in range(ORDER))
+#: The update's short form ``P - W W'`` is used while every variance stays at least this share
+#: of its prior: its rounding, ``~eps`` of the prior, is then below ``1e-12`` of the result.
+SHORT_FORM = 1e-4
 #: Input step of the differences of a model's equations in its inputs (affine there: exact
 #: for any step; a large one keeps the rounding of the equations' value out), input units.
 INPUT_STEP = 1e3
@@ -255,13 +259,13 @@ class CompiledFilter:
 
     :param dynamics: the filter's dynamics (:func:`compiled_dynamics`).
     :param measured: the state measured by each channel ``(m,)``.
-    :param R: measurement-noise covariance ``(m, m)``.
+    :param n_d: number of disturbance channels.
     """
 
-    def __init__(self, dynamics: CompiledDynamics, measured: Sequence[int], R: FloatArray) -> None:
+    def __init__(self, dynamics: CompiledDynamics, measured: Sequence[int], n_d: int) -> None:
         self.dynamics = dynamics
         self.measured = np.array(measured, dtype=np.intp)
-        self.R = np.ascontiguousarray(R, dtype=float)
+        self._n_d = n_d
         self._q = dynamics.constants.copy()  # the kernel writes each filter's constants there
         self._predict = predict_kernel(dynamics.f, dynamics.integrate, dynamics.prepare,
                                        dynamics.parameter_jacobian, dynamics.n, dynamics.p)
@@ -273,26 +277,41 @@ class CompiledFilter:
         inputs ``u`` and disturbances ``d`` held, and the transitions' model rows
         ``(N, n, n + p)``; ``Q`` the model states' process noise over ``dt`` (symmetric),
         ``noise`` the parameters' variance added."""
-        x, P = _c(x), _c(P)
+        x, P, d = self._checked(x, P), _c(P), _c(d)
         N, size = x.shape
+        if d.shape != (N, self._n_d):
+            raise ValueError(f"disturbance has shape {d.shape}; expected ({N}, {self._n_d})")
         x_out, P_out = np.empty_like(x), np.empty_like(P)
         T = np.empty((N, self.dynamics.n, size))
-        self._predict(x, P, _c(u), _c(d), self._q, self.dynamics.table, dt / substeps,
+        self._predict(x, P, _c(u), d, self._q, self.dynamics.table, dt / substeps,
                       substeps, dt, _c(Q), _c(noise), x_out, P_out, T)
         return x_out, P_out, T
 
-    def update(self, x: FloatArray, P: FloatArray, e: FloatArray, valid: NDArray[np.bool_]
+    def update(self, x: FloatArray, P: FloatArray, e: FloatArray, valid: NDArray[np.bool_],
+               R: FloatArray
                ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_]]:
         """Estimates and covariances after the innovations ``e`` ``(N, m)`` (0 where missing)
-        of the ``valid`` channels; the innovation covariances ``(N, m, m)``, ``e' S^-1 e`` and
-        whether each filter's update was made and is finite."""
-        x, P = _c(x), _c(P)
+        of the ``valid`` channels with measurement noise ``R`` ``(m, m)``; the innovation
+        covariances ``(N, m, m)``, ``e' S^-1 e`` and whether each filter's update was made and
+        is finite (:func:`update`)."""
+        x, P = self._checked(x, P), _c(P)
         N, m = e.shape
         x_out, P_out = np.empty_like(x), np.empty_like(P)
         S, nis, healthy = np.empty((N, m, m)), np.empty(N), np.empty(N, dtype=np.bool_)
-        update(x, P, _c(e), np.ascontiguousarray(valid, dtype=np.bool_), self.measured, self.R,
+        update(x, P, _c(e), np.ascontiguousarray(valid, dtype=np.bool_), self.measured, _c(R),
                x_out, P_out, S, nis, healthy)
         return x_out, P_out, S, nis, healthy
+
+
+    def _checked(self, x: FloatArray, P: FloatArray) -> FloatArray:
+        """``x`` as the kernels read it, once ``x`` and ``P`` are seen to have the shapes they
+        index without bounds checks."""
+        x = _c(x)
+        size = self.dynamics.n + self.dynamics.p
+        if x.ndim != 2 or x.shape[1] != size or np.shape(P) != (x.shape[0], size, size):
+            raise ValueError(f"x has shape {x.shape} and P {np.shape(P)}; expected (N, {size}) "
+                             f"and (N, {size}, {size})")
+        return x
 
 
 def _c(a: NDArray) -> FloatArray:
@@ -466,22 +485,29 @@ def propagate(T, P, Q, noise, out, TP, cross):
 def update(Z, P, E, valid, idx, R, Z_out, P_out, S_out, nis, healthy):
     """Every filter's update with the measurement ``y = z[idx] + v``, ``v ~ N(0, R)``.
 
-    With ``C = P H'`` (columns of ``P``), ``S = H P H' + R = L L'`` and ``W = C L^-T``:
-    ``z += W L^-1 e``, ``P -= W W'`` (the gain ``K = W L^-1``; the Joseph form
-    ``(I - K H) P (I - K H)' + K R K'`` of this ``K`` is ``P - W W'`` to rounding), one
-    symmetric half computed and mirrored.
+    With ``C = P H'`` (columns of ``P``), ``S = H P H' + R = L L'`` (entries of ``P``; over the
+    valid channels), ``W = C L^-T`` and ``v = L^-1 e``: the gain is ``K = W L^-1``,
+    ``z += W v``, ``e' S^-1 e = v' v`` and the covariance ``P - W W'``, which is the Joseph form
+    ``(I - K H) P (I - K H)' + K R K'`` of this gain to the rounding of the subtraction,
+    ``~eps P_ii`` per variance. Where a variance falls below :data:`SHORT_FORM` of its prior
+    that rounding would matter (a state measured far more precisely than it was known would
+    lose its small variance) and the Joseph form itself is computed (:func:`_joseph`). One
+    symmetric half is computed, the other mirrored.
 
     :param Z, P: estimates ``(N, n + p)`` and covariances before; ``Z_out, P_out`` after.
     :param E: innovations ``(N, m)`` (0 where missing); ``valid`` ``(N, m)`` the channels there.
     :param S_out: innovation covariances ``(N, m, m)`` (a missing channel: a unit row).
     :param nis: ``e' S^-1 e`` per filter; ``healthy``: the update was made (``S`` positive
-        definite) and its result is finite with a positive diagonal.
+        definite) and its result is finite with no negative variance.
     """
     N, size = Z.shape
     m = E.shape[1]
     channels = np.empty(m, dtype=np.intp)
-    L, Wt, v = np.empty((m, m)), np.empty((m, size)), np.empty(m)
-    WW = np.empty((size, size))
+    L, v = np.empty((m, m)), np.empty(m)
+    # over the valid channels: rows W', C', K', columns M H' and K R, R; two (size, size)
+    Wt, Ct, Kt = np.empty(m * size), np.empty(m * size), np.empty(m * size)
+    MH, KR, R_valid = np.empty(size * m), np.empty(size * m), np.empty(m * m)
+    first, second = np.empty((size, size)), np.empty((size, size))
     for b in range(N):
         count = 0
         for a in range(m):
@@ -498,19 +524,21 @@ def update(Z, P, E, valid, idx, R, Z_out, P_out, S_out, nis, healthy):
             nis[b] = np.nan
             healthy[b] = False
             continue
+        W, C = Wt[:count * size].reshape(count, size), Ct[:count * size].reshape(count, size)
         for a in range(count):  # W' = L^-1 C', v = L^-1 e
             column = idx[channels[a]]
             for r in range(size):
-                Wt[a, r] = P[b, r, column]
+                C[a, r] = P[b, r, column]
+                W[a, r] = C[a, r]
             value = E[b, channels[a]]
             for k in range(a):
                 factor = L[a, k]
                 value -= factor * v[k]
                 for r in range(size):
-                    Wt[a, r] -= factor * Wt[k, r]
+                    W[a, r] -= factor * W[k, r]
             v[a] = value / L[a, a]
             for r in range(size):
-                Wt[a, r] /= L[a, a]
+                W[a, r] /= L[a, a]
         total = 0.0
         for a in range(count):
             total += v[a] * v[a]
@@ -518,17 +546,37 @@ def update(Z, P, E, valid, idx, R, Z_out, P_out, S_out, nis, healthy):
         for r in range(size):
             value = Z[b, r]
             for a in range(count):
-                value += Wt[a, r] * v[a]
+                value += W[a, r] * v[a]
             Z_out[b, r] = value
-        healthy[b] = _downdate(P[b], Wt, count, P_out[b], WW) and _finite(Z_out[b])
+        ok = _finite(Z_out[b])
+        if _downdate(P[b], W, first, P_out[b]):
+            healthy[b] = ok
+            continue
+        K, R_v = Kt[:count * size].reshape(count, size), R_valid[:count * count].reshape(count,
+                                                                                          count)
+        for a in range(count - 1, -1, -1):  # K' = L^-T W'
+            for c in range(count):
+                R_v[a, c] = R[channels[a], channels[c]]
+            for r in range(size):
+                K[a, r] = W[a, r]
+            for k in range(a + 1, count):
+                factor = L[k, a]
+                for r in range(size):
+                    K[a, r] -= factor * K[k, r]
+            for r in range(size):
+                K[a, r] /= L[a, a]
+        healthy[b] = ok and _joseph(P[b], K, C, R_v, idx[channels[:count]],
+                                    MH[:size * count].reshape(size, count),
+                                    KR[:size * count].reshape(size, count), first, second,
+                                    P_out[b])
 
 
 @jit
-def _downdate(P, Wt, count, out, WW):
-    """``out = P - W W'`` over the first ``count`` rows of ``W'`` (``WW`` scratch), from the
-    lower halves (``P``'s two halves averaged, as the numpy path's symmetrisation), mirrored;
-    True when finite with a positive diagonal."""
-    np.dot(Wt[:count].T, Wt[:count], WW)
+def _downdate(P, W, WW, out):
+    """``out = P - W W'`` (rows ``W'``; ``WW`` scratch) from the lower halves, ``P``'s two halves
+    averaged (as the numpy path's symmetrisation), mirrored; True when finite with every variance
+    at least :data:`SHORT_FORM` of its prior (else ``out`` is to be computed otherwise)."""
+    np.dot(W.T, W, WW)
     ok = True
     for i in range(P.shape[0]):
         for j in range(i + 1):
@@ -536,7 +584,33 @@ def _downdate(P, Wt, count, out, WW):
             out[i, j] = value
             out[j, i] = value
             ok = ok and np.isfinite(value)
-        ok = ok and out[i, i] > 0.0
+        ok = ok and out[i, i] >= SHORT_FORM * P[i, i]
+    return ok
+
+
+@jit
+def _joseph(P, K, C, R, measured, MH, KR, first, second, out):
+    """``out = M - (M H' - K R) K'`` for ``M = P - K C'`` (rows ``K'``, ``C'``; ``H`` the
+    selection of the states ``measured``): the Joseph form ``M (I - K H)' + K R K'``, its two
+    halves averaged (as the numpy path's symmetrisation); True when finite with no negative
+    variance. Scratch: ``MH``, ``KR`` ``(n, count)``, ``first``, ``second`` ``(n, n)``."""
+    size, count = P.shape[0], K.shape[0]
+    np.dot(K.T, C, first)
+    np.dot(K.T, R, KR)
+    for i in range(size):  # M, and M H' - K R
+        for j in range(size):
+            first[i, j] = P[i, j] - first[i, j]
+        for a in range(count):
+            MH[i, a] = first[i, measured[a]] - KR[i, a]
+    np.dot(MH, K, second)
+    ok = True
+    for i in range(size):
+        for j in range(i + 1):
+            value = (first[i, j] - second[i, j] + first[j, i] - second[j, i]) * 0.5
+            out[i, j] = value
+            out[j, i] = value
+            ok = ok and np.isfinite(value)
+        ok = ok and out[i, i] >= 0.0
     return ok
 
 

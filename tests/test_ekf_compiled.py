@@ -149,6 +149,25 @@ def test_missing_channels_get_no_gain_and_match_the_numpy_path():
     np.testing.assert_allclose(a.nis, b.nis, rtol=1e-8)
 
 
+def test_a_state_measured_far_more_precisely_than_known_keeps_its_small_variance():
+    """The morph fraction known to 1e-6 and measured to 1e-18: its variance after the update is
+    1e-36, which P - K S K' would lose to cancellation (the Joseph form is used there)."""
+    model = ROVModel()
+    P0 = np.diag(np.r_[np.full(12, 1e-2), 1e-12])
+    R = np.r_[np.full(3, 1e-4), 1e-36]
+    runs = []
+    for compiled in (True, False):
+        ekf = ExtendedKalmanFilter.from_model(model, 0.1, measured=["u", "v", "w", "s"],
+                                              Q=np.full(13, 1e-8), R=R, P0=P0,
+                                              compiled=compiled)
+        ekf.update([[1.5, 0.0, 0.0, 0.0]])
+        runs.append(ekf.P[0])
+    compiled_P, numpy_P = runs
+    np.testing.assert_allclose(compiled_P[12, 12], 1e-36, rtol=1e-9)
+    np.testing.assert_allclose(compiled_P, numpy_P, rtol=1e-9, atol=1e-16)
+    assert np.linalg.eigvalsh(compiled_P).min() > 0
+
+
 def test_a_filter_gone_bad_is_flagged_and_left_alone():
     ekf = bench.make_filter(3)
     forces, y = REFERENCE["forces"], REFERENCE["y"]
