@@ -12,6 +12,7 @@ import scipy.linalg
 
 from estimators import ekf_compiled
 from estimators.ekf import ExtendedKalmanFilter
+from estimators.identification import Segment, identify_ekf
 from marine_envs.models import get_model
 from marine_envs.models.rov import SEED_COEFFICIENTS, ROVModel
 
@@ -237,3 +238,20 @@ def test_what_cannot_be_compiled_runs_the_numpy_path():
         dp, dt=0.1, measured=["north", "east"], Q=np.ones(15), R=[1.0, 1.0]).compiled
     assert ExtendedKalmanFilter.from_model(rov, Q=np.ones(13), parameters=["Xuu"],
                                            **kwargs).compiled
+
+
+def test_identification_of_the_rov_runs_compiled_and_as_the_numpy_path():
+    """identify_ekf over two segments of the record (the shorter one padded with missing
+    samples), fused: the compiled and the numpy path agree."""
+    forces, s_cmd, y = REFERENCE["forces"], REFERENCE["s_cmd"], REFERENCE["y"]
+    d = np.column_stack([np.zeros((len(s_cmd), 3)), s_cmd])
+    segments = [Segment(time=np.arange(T) * bench.DT, inputs=forces[:T], measurements=y[:T, i],
+                        measured=bench.MEASURED, disturbance=d[:T], angular=("psi",),
+                        name=f"run {i}") for i, T in enumerate((120, 90))]
+    names = ("Xuu", "Nrr", "Yvv", "Zww")
+    results = [identify_ekf(ROVModel(), segments, names, measurement_std=bench.NOISE,
+                            compiled=compiled) for compiled in (True, False)]
+    compiled, numpy_path = results
+    assert compiled.info["compiled"] and not numpy_path.info["compiled"]
+    assert (np.abs(compiled.estimate - numpy_path.estimate) / numpy_path.std).max() < 1e-6
+    np.testing.assert_allclose(compiled.std, numpy_path.std, rtol=1e-6)
