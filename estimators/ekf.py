@@ -12,6 +12,11 @@ Jacobian at the prior mean, ``Phi = exp(A dt)`` (Taylor series with scaling and 
 update is in Joseph form and symmetrised. The morphing-robot patent, the DP wave-frequency patent
 and the hovercraft EKF paper all identify parameters this way: hydrodynamic coefficients, wave
 frequencies and manoeuvring derivatives.
+
+A filter made by :meth:`ExtendedKalmanFilter.from_model` of a model with compiled equations runs
+predict and update compiled, filter by filter (:mod:`estimators.ekf_compiled`: the same filter;
+on the joint ROV benchmark 12x faster for one filter, 2.5x to 3x for batches of 64 to 1024); the
+numpy code here is its reference.
 """
 
 from __future__ import annotations

@@ -302,7 +302,6 @@ class CompiledFilter:
                x_out, P_out, S, nis, healthy)
         return x_out, P_out, S, nis, healthy
 
-
     def _checked(self, x: FloatArray, P: FloatArray) -> FloatArray:
         """``x`` as the kernels read it, once ``x`` and ``P`` are seen to have the shapes they
         index without bounds checks."""

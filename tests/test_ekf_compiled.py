@@ -48,8 +48,8 @@ def compiled_run():
 def test_compiled_filter_gives_the_saved_numpy_estimates(compiled_run):
     ekf, x, std = compiled_run
     assert ekf.compiled
-    # the estimates to 1e-6 of their standard deviation (measured: 5e-9), the covariances to
-    # 1e-8 of their largest entry (measured: 3e-11)
+    # the estimates to 1e-6 of their standard deviation (measured: 2e-9), the covariances to
+    # 1e-8 of their largest entry (measured: 3e-12)
     assert np.abs(x - REFERENCE["x"]).max(initial=0) > 0  # another path, not a copy
     assert (np.abs(x - REFERENCE["x"]) / REFERENCE["std"]).max() < 1e-6
     np.testing.assert_allclose(std, REFERENCE["std"], rtol=1e-6)
