@@ -416,10 +416,11 @@ def transition_rows(A, dt, T, square, scaled):
         if squarings > 0:
             for j in range(size):
                 M[i, j] *= s1
+            for j in range(n):
+                X[i, j] *= s1
+                X2[i, j] *= s2
+                powers[i, j] *= s3
         for j in range(n):
-            X[i, j] *= s1
-            X2[i, j] *= s2
-            powers[i, j] *= s3
             X4[i, j] = powers[i, n + j] * s4
     X3 = powers[:, :n]
     G[:, :] = 0.0
