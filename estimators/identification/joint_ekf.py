@@ -38,8 +38,8 @@ def identify_ekf(model: VehicleModel, data: Segment | Sequence[Segment],
                  reference: Mapping[str, float] | VehicleModel | None = None,
                  measurement_std: ArrayLike | None = None, process_std: ArrayLike | None = None,
                  state_std: ArrayLike | None = None, substeps: int = 1, smooth: bool = False,
-                 damping: Mapping[str, float] | None = None, max_relative_std: float = 0.3
-                 ) -> Identification:
+                 damping: Mapping[str, float] | None = None, max_relative_std: float = 0.3,
+                 compiled: bool = True) -> Identification:
     """Joint state and parameter EKF over one or several segments.
 
     Each segment runs in its own filter of a batch, from the same prior; the parameter
@@ -65,6 +65,8 @@ def identify_ekf(model: VehicleModel, data: Segment | Sequence[Segment],
     :param smooth: also return RTS-smoothed states per segment (``result.states``).
     :param damping: expected signs of damping coefficients (default :func:`damping_signs`).
     :param max_relative_std: identifiable when ``std < max_relative_std * prior std``.
+    :param compiled: the filter's compiled path where the model has one (as
+        :meth:`ExtendedKalmanFilter.from_model`); False: the numpy path.
     """
     segments = as_segments(data)
     names = check_parameters(model, parameters)
@@ -79,7 +81,7 @@ def identify_ekf(model: VehicleModel, data: Segment | Sequence[Segment],
                              f"({len(names)}, {len(names)})")
     scale = np.sqrt(np.diag(P_theta))
     run = _run_filters(model, segments, names, theta0, P_theta, measurement_std, process_std,
-                       state_std, substeps, smooth)
+                       state_std, substeps, smooth, compiled)
     estimate, cov = run["estimate"], run["cov"]
     unit = np.outer(scale, scale)
     information = _pinv(cov / unit) - _pinv(P_theta / unit)  # what the data added
@@ -121,14 +123,14 @@ def _noise_defaults(model: VehicleModel, s: Segment, measurement_std: ArrayLike 
 def _run_filters(model: VehicleModel, segments: list[Segment], names: tuple[str, ...],
                  theta0: FloatArray, P_theta: FloatArray, measurement_std: ArrayLike | None,
                  process_std: ArrayLike | None, state_std: ArrayLike | None, substeps: int,
-                 smooth: bool) -> dict[str, Any]:
+                 smooth: bool, compiled: bool = True) -> dict[str, Any]:
     """The batch of filters (one per segment) and the fusion of their parameter posteriors."""
     first = segments[0]
     r, q, x_std = _noise_defaults(model, first, measurement_std, process_std, state_std)
     n, p, N = len(model.state_names), len(names), len(segments)
     ekf = ExtendedKalmanFilter.from_model(
         model, first.dt, measured=first.measured, Q=q**2, R=r**2, parameters=names,
-        angular=first.angular, substeps=substeps, batch_size=N)
+        angular=first.angular, substeps=substeps, batch_size=N, compiled=compiled)
     P0 = np.zeros((n + p, n + p))
     P0[:n, :n], P0[n:, n:] = np.diag(x_std**2), P_theta
     x0 = np.array([np.concatenate([_initial_state(model, s), theta0]) for s in segments])
@@ -143,7 +145,7 @@ def _run_filters(model: VehicleModel, segments: list[Segment], names: tuple[str,
             "mean_nis": [float(v) for v in log["mean_nis"]], "channels": list(first.measured),
             "measurement_std": r.tolist(), "diverged": [s.name for s, d in
                                                         zip(segments, ekf.diverged, strict=True)
-                                                        if d]}
+                                                        if d], "compiled": ekf.compiled}
     return {"estimate": estimate, "cov": cov, "trace": trace,
             "trace_std": np.sqrt(np.maximum(np.diagonal(trace_cov, axis1=-2, axis2=-1), 0.0)),
             "trace_time": np.arange(trace.shape[0]) * first.dt, "info": info,
