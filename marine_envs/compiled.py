@@ -50,6 +50,7 @@ def jit(func: F | None = None, **options: Any) -> F:
     """
     if func is None:
         return lambda f: jit(f, **options)  # type: ignore[return-value]
+    _file_hash(func.__code__.co_filename)  # the source as imported (a later edit is not it)
     dispatcher = numba.njit(**{**OPTIONS, **options})(func)
     try:
         dispatcher._cache = _SourceKeyedCache(func)

@@ -188,7 +188,8 @@ def test_a_diverging_boat_is_named_and_the_step_not_taken():
         env.step(np.zeros((3, 2), dtype=np.float32))
     np.testing.assert_array_equal(sim.x, x)
     np.testing.assert_array_equal(sim.steps, steps)
-    np.testing.assert_array_equal(sim._compiled.chain.noise.stream.cursor, noise)  # sensors untouched
+    # the sensors untouched
+    np.testing.assert_array_equal(sim._compiled.chain.noise.stream.cursor, noise)
 
 
 def test_envs_with_effects_or_a_zigzag_law_run_in_numpy_and_the_others_compiled():

@@ -194,11 +194,11 @@ def measure_boats(st, boats, x, y, valid):
             for k in range(x.shape[1]):
                 total += st.output_map[c, k] * x[r, k]
             z[r, c] = total
-    measure_chain(boats, z, st.bias, st.wrap, st.mu, st.group, st.zoom_settings, st.limit, st.period,
-                  st.lag, st.prob, st.noisy, st.zooming, st.holding, st.delaying, st.dropping,
-                  st.noise_rows, st.noise_cursor, st.zoom_mu, st.count, st.held, st.buf, st.head,
-                  st.delay_fresh, st.dropout_rows, st.dropout_cursor, st.kept, st.dropout_fresh,
-                  y, valid)
+    measure_chain(boats, z, st.bias, st.wrap, st.mu, st.group, st.zoom_settings, st.limit,
+                  st.period, st.lag, st.prob, st.noisy, st.zooming, st.holding, st.delaying,
+                  st.dropping, st.noise_rows, st.noise_cursor, st.zoom_mu, st.count, st.held,
+                  st.buf, st.head, st.delay_fresh, st.dropout_rows, st.dropout_cursor, st.kept,
+                  st.dropout_fresh, y, valid)
     return _used_up(st.noise_cursor) or _used_up(st.dropout_cursor)
 
 
