@@ -50,6 +50,7 @@ class BlockStream:
         self.__dict__.update(state)
         if "blocks" in state:
             self.rows = self.blocks.reshape(-1, self.width)
+            self.recount()  # (compiled code may have moved the cursors without counting)
 
     def restart(self, idx: NDArray[np.intp]) -> None:
         """Refill boats ``idx`` from their signal's current state (call at episode start)."""

@@ -167,14 +167,14 @@ def rows(core: RightHandSide) -> Callable[..., None]:
 def rk4(core: RightHandSide) -> Callable[..., None]:
     """The function ``f(x, u, d, p, h, substeps, out, work)``: ``substeps`` classical
     Runge-Kutta steps of ``h`` seconds of ``x_dot = core(x, u, d, p)`` from ``x``, inputs held,
-    written to ``out``; ``work`` is scratch of shape ``(3, n_x)``. The same arithmetic, in the
-    same order, as :func:`marine_envs.models.integrate.rk4`; ``core`` is called from one place,
-    so that it is merged into the step once."""
+    written to ``out``; ``work`` is scratch of 3 rows of at least ``n_x``. The same arithmetic,
+    in the same order, as :func:`marine_envs.models.integrate.rk4`; ``core`` is called from one
+    place, so that it is merged into the step once."""
 
     @jit
     def step(x, u, d, p, h, substeps, out, work):
         n = x.size
-        k, total, z = work[0], work[1], work[2]
+        k, total, z = work[0, :n], work[1, :n], work[2, :n]
         for i in range(n):  # (loops, not slice copies: those compile numba's error messages)
             out[i] = x[i]
         for _ in range(substeps):

@@ -71,23 +71,35 @@ def new_state(*fields):
 @jit
 def exact_step(x, u, d, p, h, substeps, out, work):
     """The exact (zero-order-hold) step of an affine model, ``out = [x u d] @ T + c``, with
-    ``p`` = ``T`` row by row, then ``c`` (:class:`~marine_envs.models.integrate.ExactStep`)."""
+    ``p`` = ``T`` row by row, then ``c`` (:class:`~marine_envs.models.integrate.ExactStep`);
+    ``work[0]`` holds ``[x u d]``. Each output is summed in the order of ``[x u d]``, then the
+    offset; four outputs at a time in registers (sums kept in ``out`` would wait on memory at
+    every term: it might alias ``p``)."""
     n_x, n_u, n_d = x.size, u.size, d.size
-    # the sums run side by side over the outputs (independent: in parallel), each in the order
-    # of [x u d], then the offset
-    for i in range(n_x):
-        out[i] = 0.0
+    n_in = n_x + n_u + n_d
+    xud = work[0]
     for k in range(n_x):
-        for i in range(n_x):
-            out[i] += x[k] * p[k * n_x + i]
+        xud[k] = x[k]
     for k in range(n_u):
-        for i in range(n_x):
-            out[i] += u[k] * p[(n_x + k) * n_x + i]
+        xud[n_x + k] = u[k]
     for k in range(n_d):
-        for i in range(n_x):
-            out[i] += d[k] * p[(n_x + n_u + k) * n_x + i]
-    for i in range(n_x):
-        out[i] += p[(n_x + n_u + n_d) * n_x + i]
+        xud[n_x + n_u + k] = d[k]
+    for i in range(0, n_x - 3, 4):
+        t0 = t1 = t2 = t3 = 0.0
+        for k in range(n_in):
+            z, row = xud[k], k * n_x + i
+            t0 += z * p[row]
+            t1 += z * p[row + 1]
+            t2 += z * p[row + 2]
+            t3 += z * p[row + 3]
+        c = n_in * n_x + i
+        out[i], out[i + 1], out[i + 2], out[i + 3] = t0 + p[c], t1 + p[c + 1], t2 + p[c + 2], \
+            t3 + p[c + 3]
+    for i in range(n_x - n_x % 4, n_x):  # the rest, one at a time
+        total = 0.0
+        for k in range(n_in):
+            total += xud[k] * p[k * n_x + i]
+        out[i] = total + p[n_in * n_x + i]
 
 
 def step_kernel(integrate: Callable[..., None]) -> Callable[..., int]:
@@ -113,9 +125,13 @@ def step_kernel(integrate: Callable[..., None]) -> Callable[..., int]:
                 for j in range(d.shape[1]):
                     d[b, j] = st.d_rows[st.d_cursor[b], j]
             refill = _advance(st.d_cursor)
-        n_a = actions.shape[1]
+        # the fields as locals: loads through the state are not hoisted out of the loops
+        p, h, substeps, mid, scale = st.p, st.h, st.substeps, st.mid, st.scale
+        allocation, allocated, weights, reference = st.allocation, st.allocated, st.weights, \
+            st.reference
+        n_a, n_u = actions.shape[1], u_out.shape[1]
         f = np.empty(n_a)
-        work = np.empty((3, n_x))
+        work = np.empty((3, n_x + n_u + d.shape[1]))  # scratch rows of at least [x u d]
         for b in range(n_boats):
             # the actions in [-1, 1] command the actuators over their ranges
             clip = False
@@ -125,28 +141,29 @@ def step_kernel(integrate: Callable[..., None]) -> Callable[..., int]:
                     a, clip = 1.0, True
                 elif a < -1.0:
                     a, clip = -1.0, True
-                f[j] = st.mid[j] + st.scale[j] * a
+                f[j] = mid[j] + scale[j] * a
             clipped[b] = clip
-            for i in range(u_out.shape[1]):
-                if st.allocated:
+            for i in range(n_u):
+                if allocated:
                     total = 0.0
                     for j in range(n_a):
-                        total += f[j] * st.allocation[j, i]
+                        total += f[j] * allocation[j, i]
                     u_out[b, i] = total
                 else:
                     u_out[b, i] = f[i]
-            reward[b] = _reward(st, x[b], u_out[b], d[b])
-            integrate(x[b], u_out[b], d[b], st.p, st.h, st.substeps, x_out[b], work)
+            reward[b] = _reward(weights, reference, x[b], u_out[b], d[b])
+            integrate(x[b], u_out[b], d[b], p, h, substeps, x_out[b], work)
             for i in range(n_x):
                 if not np.isfinite(x_out[b, i]):
                     return b
+        limited, low, high, steps = st.limited, st.low, st.high, st.steps
         for b in range(n_boats):
             exceeded = False
-            for k in range(st.limited.size):
-                value = x_out[b, st.limited[k]]
-                exceeded = exceeded or value < st.low[k] or value > st.high[k]
+            for k in range(limited.size):
+                value = x_out[b, limited[k]]
+                exceeded = exceeded or value < low[k] or value > high[k]
             failed[b] = exceeded
-            st.steps[b] += 1
+            steps[b] += 1
         if measure:
             refill = measure_boats(st, st.boats, x_out, y, valid) or refill
         return REFILL if refill else STEPPED
@@ -166,9 +183,9 @@ def _advance(cursor):
 
 
 @jit
-def _reward(st, x, u, d):
-    """Minus the weighted squares of ``[x u d]`` about the reference (the task's cost)."""
-    w, ref = st.weights, st.reference
+def _reward(w, ref, x, u, d):
+    """Minus the weighted squares of ``[x u d]`` about the reference ``ref`` (the task's cost,
+    weights ``w``)."""
     total = 0.0
     for k in range(x.size):
         total += (x[k] - ref[k]) * (x[k] - ref[k]) * w[k]
@@ -186,13 +203,13 @@ def measure_boats(st, boats, x, y, valid):
     """The sensors' measurements ``y`` and valid channels of boats ``boats`` (row r of states
     ``x``, ``y`` and ``valid`` is boat ``boats[r]``'s); only their sensors advance. True when a
     sensor's random stream used up a boat's block."""
-    m = y.shape[1]
+    m, outputs = y.shape[1], st.output_map
     z = np.empty((boats.size, m))
     for r in range(boats.size):
         for c in range(m):
             total = 0.0
             for k in range(x.shape[1]):
-                total += st.output_map[c, k] * x[r, k]
+                total += outputs[c, k] * x[r, k]
             z[r, c] = total
     measure_chain(boats, z, st.bias, st.wrap, st.mu, st.group, st.zoom_settings, st.limit,
                   st.period, st.lag, st.prob, st.noisy, st.zooming, st.holding, st.delaying,
