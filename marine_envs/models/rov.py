@@ -224,7 +224,8 @@ def rov_features(x, u, d, F):
     if current:  # the hydrodynamic terms act on the velocity through the water
         c_u, c_v, c_w = ned_to_body(sin, cos, d[0], d[1], d[2])
         u_r, v_r, w_r = u_r - c_u, v_r - c_v, w_r - c_w
-    nur = (u_r, v_r, w_r, x[3], x[4], x[5])
+    nur = local_array(6)  # (an array: a tuple indexed in a loop is copied at every index)
+    nur[0], nur[1], nur[2], nur[3], nur[4], nur[5] = u_r, v_r, w_r, x[3], x[4], x[5]
     for i in range(3):
         for j in range(3):
             F[3 * i + j] = x[3 + i] * nur[j]

@@ -286,15 +286,20 @@ class WaveRealisation(BlockSource):
         else:
             # boats whose blocks start at the same time share the Hs-shaped weights: one real
             # matrix product per start time, compiled (single-threaded: a BLAS product of one
-            # boat's phasors waits for its threads whenever another job holds a core)
+            # boat's phasors waits for its threads whenever another job holds a core); a boat
+            # alone is summed directly (making the weights costs three times more)
             values = np.empty((k, BLOCK * c))
             starts, group = np.unique(self.block_time[idx], return_inverse=True)
             for g, start in enumerate(starts):
                 members = np.flatnonzero(group == g)
                 phasors = self.phasor[idx[members]]
                 block = np.empty((members.size, BLOCK * c))
-                _weighted(np.hstack([phasors.real, phasors.imag]),
-                          self._shaped_weights(float(start)), block)
+                if members.size == 1 and float(start) not in self._shaped_cache:
+                    _shaped_block(phasors[0].real.copy(), phasors[0].imag.copy(),
+                                  *self._shaping, *self._hs_rows(float(start)), block[0])
+                else:
+                    _weighted(np.hstack([phasors.real, phasors.imag]),
+                              self._shaped_weights(float(start)), block)
                 values[members] = block
             values = values.reshape(k, BLOCK, c)
         self.phasor[idx] *= self._block_rotation
@@ -307,17 +312,21 @@ class WaveRealisation(BlockSource):
         G_jc(Hs(t)))`` for phasors ``Z`` at the block's start. A few recent start times are
         kept (boats reset together share them)."""
         if start not in self._shaped_cache:
-            times = start + self._step_times
-            hs = self.sea.hs(times)  # type: ignore[operator]
-            pos = np.interp(hs, self._hs_grid, np.arange(self._hs_grid.size))
-            j = np.minimum(pos.astype(np.intp), self._hs_grid.size - 2)
             n, c = self.omega.size, self.n_channels
             weights = np.empty((2 * n, BLOCK * c))
-            _shaped_weights(*self._shaping, j, pos - j, weights)
+            _shaped_weights(*self._shaping, *self._hs_rows(start), weights)
             if len(self._shaped_cache) >= SHAPED_CACHE:
                 del self._shaped_cache[next(iter(self._shaped_cache))]  # the oldest
             self._shaped_cache[start] = weights
         return self._shaped_cache[start]
+
+    def _hs_rows(self, start: float) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
+        """The rows ``j`` of the gain table below each step's Hs in a block starting at
+        ``start`` (s), and the weight of row ``j + 1`` (linear interpolation)."""
+        hs = self.sea.hs(start + self._step_times)  # type: ignore[operator]
+        pos = np.interp(hs, self._hs_grid, np.arange(self._hs_grid.size))
+        j = np.minimum(pos.astype(np.intp), self._hs_grid.size - 2)
+        return j, pos - j
 
     def sample(self, n_steps: int, rng: np.random.Generator) -> NDArray[np.float64]:
         """One boat's realisation over ``n_steps`` steps (n_steps x channels), for analysis."""
@@ -359,3 +368,25 @@ def _weighted(phasors, weights, out):
             a = phasors[r, i]
             for col in range(out.shape[1]):
                 out[r, col] += a * weights[i, col]
+
+
+@jit
+def _shaped_block(phasor_re, phasor_im, rotation_re, rotation_im, table_re, table_im, j, w, out):
+    """One boat's block (``BLOCK * c`` values, step by step) of the Hs-shaped sea summed
+    directly: ``Re(sum_i Z_i rotation[i, t] G_ik(Hs(t)))`` with the gains interpolated as in
+    :func:`_shaped_weights` (the same sum, without the weights matrix)."""
+    n, steps = rotation_re.shape
+    c = table_re.shape[2]
+    for col in range(out.size):
+        out[col] = 0.0
+    for i in range(n):
+        for t in range(steps):
+            r_re, r_im = rotation_re[i, t], rotation_im[i, t]
+            z_re = phasor_re[i] * r_re - phasor_im[i] * r_im
+            z_im = phasor_re[i] * r_im + phasor_im[i] * r_re
+            row, weight = j[t], w[t]
+            keep = 1 - weight
+            for k in range(c):
+                g_re = keep * table_re[i, row, k] + weight * table_re[i, row + 1, k]
+                g_im = keep * table_im[i, row, k] + weight * table_im[i, row + 1, k]
+                out[t * c + k] += z_re * g_re - z_im * g_im
