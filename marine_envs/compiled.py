@@ -30,9 +30,13 @@ import numba
 import numpy as np
 from numba.core import cgutils
 from numba.core import types as nb_types
-from numba.core.caching import FunctionCache
 from numba.core.registry import CPUDispatcher
 from numba.extending import intrinsic
+
+try:
+    from numba.core.caching import FunctionCache
+except ImportError:  # a numba that moved it: its own cache, keyed on a function's bytecode only
+    FunctionCache = None
 
 F = TypeVar("F", bound=Callable[..., Any])
 #: Options of every compiled function. ``inline="always"``: a compiled function called from
@@ -45,11 +49,13 @@ OPTIONS = {"inline": "always", "nogil": True, "error_model": "numpy", "fastmath"
 def jit(func: F | None = None, **options: Any) -> F:
     """``numba.njit`` with the project's options and a source-keyed disk cache.
 
-    :param func: the function (use as ``@jit`` or ``@jit(inline="always")``).
+    :param func: the function (use as ``@jit`` or ``@jit(inline="never")``).
     :param options: further ``numba.njit`` options.
     """
     if func is None:
         return lambda f: jit(f, **options)  # type: ignore[return-value]
+    if FunctionCache is None:
+        return numba.njit(**{**OPTIONS, "cache": True, **options})(func)
     _file_hash(func.__code__.co_filename)  # the source as imported (a later edit is not it)
     dispatcher = numba.njit(**{**OPTIONS, **options})(func)
     try:
@@ -59,11 +65,12 @@ def jit(func: F | None = None, **options: Any) -> F:
     return dispatcher
 
 
-class _SourceKeyedCache(FunctionCache):
-    """numba's function cache with :func:`fingerprint` as the key (see the module docstring)."""
+if FunctionCache is not None:
+    class _SourceKeyedCache(FunctionCache):
+        """numba's function cache with :func:`fingerprint` as the key (module docstring)."""
 
-    def _index_key(self, sig, codegen):
-        return sig, codegen.magic_tuple(), fingerprint(self._py_func)
+        def _index_key(self, sig, codegen):
+            return sig, codegen.magic_tuple(), fingerprint(self._py_func)
 
 
 def fingerprint(func: Callable[..., Any]) -> str:

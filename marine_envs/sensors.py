@@ -77,11 +77,14 @@ class _RandomStage(Stage):
         self.stream = BlockStream(width, self._draw_blocks)
 
     @abstractmethod
-    def _draw(self, rng: np.random.Generator) -> FloatArray:
-        """One boat's next block of random numbers (BLOCK x width)."""
+    def _draw(self, rng: np.random.Generator, out: FloatArray) -> None:
+        """One boat's next block of random numbers into ``out`` (BLOCK x width)."""
 
     def _draw_blocks(self, idx: NDArray[np.intp]) -> FloatArray:
-        return np.stack([self._draw(self._rngs[i]) for i in idx])
+        blocks = np.empty((idx.size, BLOCK, self.stream.width))
+        for block, i in zip(blocks, idx, strict=True):  # into place: no copy per boat
+            self._draw(self._rngs[i], block)
+        return blocks
 
     def bind(self, batch_size: int) -> None:
         self.stream.bind(batch_size)
@@ -113,9 +116,9 @@ class GaussianNoise(_RandomStage):
             raise ValueError(f"noise std={self.std.tolist()} is invalid: must be finite and >= 0")
         super().__init__(self.std.size)
 
-    def _draw(self, rng: np.random.Generator) -> FloatArray:
-        # scaled as drawn, so a step costs one addition
-        return rng.standard_normal((BLOCK, self.std.size)) * self.std
+    def _draw(self, rng: np.random.Generator, out: FloatArray) -> None:
+        rng.standard_normal(out=out)
+        out *= self.std  # scaled as drawn, so a step costs one addition
 
     def __call__(self, z: FloatArray) -> FloatArray:
         z += self.stream.next()
@@ -306,8 +309,8 @@ class Dropout(_RandomStage):
             raise ValueError(f"dropout={self.prob.tolist()} is invalid: probabilities in [0, 1)")
         super().__init__(self.prob.size)
 
-    def _draw(self, rng: np.random.Generator) -> FloatArray:
-        return rng.random((BLOCK, self.prob.size))
+    def _draw(self, rng: np.random.Generator, out: FloatArray) -> None:
+        rng.random(out=out)
 
     def bind(self, batch_size: int) -> None:
         super().bind(batch_size)

@@ -82,7 +82,9 @@ class GaussMarkov(BlockSource):
         self._start[idx] = True
 
     def blocks(self, idx: NDArray[np.intp]) -> FloatArray:
-        noise = np.stack([self._rngs[i].standard_normal((BLOCK, self.width)) for i in idx])
+        noise = np.empty((idx.size, BLOCK, self.width))
+        for block, i in zip(noise, idx, strict=True):  # into place: no copy per boat
+            self._rngs[i].standard_normal(out=block)
         # a new episode starts in the stationary distribution; a refill continues the last value
         starting = self._start[idx, None]
         first = np.where(starting, self.std * noise[:, 0], 0.0)
