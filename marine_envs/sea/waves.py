@@ -48,6 +48,8 @@ from .spectra import MeasuredSpectrum, jonswap, pierson_moskowitz
 G = 9.81  #: gravity, m/s^2
 #: Block start times whose Hs-shaped weights are kept (each ``2n x BLOCK x channels`` floats).
 SHAPED_CACHE = 8
+#: Boats sharing a block start from which their product with the weights goes to BLAS.
+BLAS_FROM = 16
 _GOLDEN = (math.sqrt(5) - 1) / 2
 Coupling = Callable[[NDArray[np.float64]], NDArray[np.complex128]]
 
@@ -285,9 +287,9 @@ class WaveRealisation(BlockSource):
                 values = values * self.sea.hs(times)[:, :, None]  # type: ignore[operator]
         else:
             # boats whose blocks start at the same time share the Hs-shaped weights: one real
-            # matrix product per start time, compiled (single-threaded: a BLAS product of one
-            # boat's phasors waits for its threads whenever another job holds a core); a boat
-            # alone is summed directly (making the weights costs three times more)
+            # matrix product per start time (compiled for a few boats: BLAS threads cost more
+            # than such a product whenever another job holds a core); a boat alone is summed
+            # directly (making the weights costs three times more)
             values = np.empty((k, BLOCK * c))
             starts, group = np.unique(self.block_time[idx], return_inverse=True)
             for g, start in enumerate(starts):
@@ -297,9 +299,12 @@ class WaveRealisation(BlockSource):
                 if members.size == 1 and float(start) not in self._shaped_cache:
                     _shaped_block(phasors[0].real.copy(), phasors[0].imag.copy(),
                                   *self._shaping, *self._hs_rows(float(start)), block[0])
-                else:
+                elif members.size < BLAS_FROM:
                     _weighted(np.hstack([phasors.real, phasors.imag]),
                               self._shaped_weights(float(start)), block)
+                else:
+                    np.dot(np.hstack([phasors.real, phasors.imag]),
+                           self._shaped_weights(float(start)), out=block)
                 values[members] = block
             values = values.reshape(k, BLOCK, c)
         self.phasor[idx] *= self._block_rotation
