@@ -69,6 +69,7 @@ class GaussMarkov(BlockSource):
         with np.errstate(divide="ignore"):
             self.a = np.exp(-dt / tau)
         self.gain = self.std * np.sqrt(1 - self.a**2)
+        self._decay = self.a ** np.arange(BLOCK)[:, None]  # a**0 = 1 also for white noise
         super().__init__(width)
 
     def bind_state(self, batch_size: int) -> None:
@@ -82,34 +83,39 @@ class GaussMarkov(BlockSource):
         self._start[idx] = True
 
     def blocks(self, idx: NDArray[np.intp]) -> FloatArray:
-        noise = np.empty((idx.size, BLOCK, self.width))
-        for block, i in zip(noise, idx, strict=True):  # into place: no copy per boat
-            self._rngs[i].standard_normal(out=block)
-        # a new episode starts in the stationary distribution; a refill continues the last value
-        starting = self._start[idx, None]
-        first = np.where(starting, self.std * noise[:, 0], 0.0)
-        previous = np.where(starting, 0.0, self._last[idx])
-        noise[:, 0] = np.where(starting, 0.0, noise[:, 0])
-        decay = self.a ** np.arange(BLOCK)[:, None]  # a**0 = 1 also for white noise (a = 0)
-        block = first[:, None, :] * decay
-        _add_filtered(noise, self.gain, self.a, previous, block)
-        self._last[idx], self._start[idx] = block[:, -1], False
-        return block + self.mean
+        block = np.empty((idx.size, BLOCK, self.width))
+        for noise, i in zip(block, idx, strict=True):  # into place: no copy per boat
+            self._rngs[i].standard_normal(out=noise)
+        _filter_block(block, idx, self._start, self._last, self.std, self.gain, self.a,
+                      self._decay, self.mean)
+        return block
 
 
 @jit
-def _add_filtered(noise, gain, a, previous, out):
-    """``out += y`` with ``y_t = gain x_t + a y_{t-1}`` along axis 1 of ``noise`` (boats x steps x
-    channels), each boat's recursion starting from ``previous``: the exact AR(1) sampling of
-    :class:`GaussMarkov` (what ``scipy.signal.lfilter([gain], [1, -a])`` computes)."""
+def _filter_block(noise, idx, start, last, std, gain, a, decay, mean):
+    """Turn boats ``idx``'s standard normal numbers ``noise`` (boats x steps x channels) into
+    their next block of :class:`GaussMarkov` values, in place: the exact AR(1) sampling
+    ``y_t = gain n_t + a y_{t-1}`` (what ``scipy.signal.lfilter([gain], [1, -a])`` computes)
+    continuing each boat's ``last`` value, or, where ``start``, from the stationary
+    distribution (``std`` times the first number, decaying as ``decay = a**t``); then the
+    ``mean``. Updates ``last`` and clears ``start`` of those boats. One compiled pass: a boat
+    refilled alone would otherwise pay a dozen numpy calls."""
     boats, steps, width = noise.shape
-    for b in range(boats):
+    for r in range(boats):
+        b = idx[r]
         for c in range(width):
-            y = a[c] * previous[b, c]
+            if start[b]:  # the first number sets the stationary start; the recursion is 0
+                first, y, n0 = std[c] * noise[r, 0, c], a[c] * 0.0, 0.0
+            else:
+                first, y, n0 = 0.0, a[c] * last[b, c], noise[r, 0, c]
+            value = 0.0
             for t in range(steps):
-                y = gain[c] * noise[b, t, c] + y
-                out[b, t, c] += y
+                y = gain[c] * (n0 if t == 0 else noise[r, t, c]) + y
+                value = first * decay[t, c] + y
+                noise[r, t, c] = value + mean[c]
                 y = a[c] * y
+            last[b, c] = value
+        start[b] = False
 
 
 class StepEvent(BlockSource):
