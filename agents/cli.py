@@ -74,7 +74,7 @@ outputs (in --out):
   rows.csv, rows.parquet  a row per seed: vehicle, estimator, controller, sea, sensor, seed,
                           status (ok or n/a: why), cost, failed, seconds, rms_<state> and
                           rms_<input> (SI; _deg: degrees), saturated, estimation_rms_<state>
-  summary.md              cost mean ± std per cell; the check true <= KF <= raw under LQR
+  summary.md              cost mean ± std per cell; the checks KF <= raw, true <= KF under LQR
   cost_by_estimator.png   cost by estimator per vehicle, a bar per controller
   degradation.png         cost against each degradation's level (if it has several levels)
 

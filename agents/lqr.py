@@ -6,6 +6,12 @@ The designs (``lqr``, ``dlqr``, ``lqr_integral``, ``zoh``) are the project's one
 ``dt``. The environments' stage cost is exactly the discrete one (same Q, R), so LQR and RL
 agents are compared on one number.
 
+Behind a Kalman filter that carries its disturbances' models (``estimators.disturbance``: waves,
+current, wind as states of their own), the design is the LQR of that augmented model: the
+disturbance states are not controllable, so the gain on them is the feed-forward that meets a
+predicted wave or gust instead of waiting for the error it makes (LQG with a disturbance model;
+:meth:`LQRPolicy.for_env`'s ``feedforward``).
+
 Integral action augments the state with ``z`` per integrated state ``i``:
 ``z_{k+1} = z_k + dt (x_i - x_ref_i)``, and ``u = u_ref - K_x (x - x_ref) - K_z z``; it removes
 the steady offset a constant disturbance leaves. The policy keeps ``z`` per batch row, with
@@ -198,9 +204,36 @@ class LQRPolicy:
                    anti_windup=anti_windup, observation_size=observation_size)
 
     @classmethod
+    def for_augmented(cls, F: ArrayLike, G: ArrayLike, q: ArrayLike, r: ArrayLike, *,
+                      x_ref: ArrayLike, u_ref: ArrayLike, u_low: ArrayLike, u_high: ArrayLike,
+                      allocation: ArrayLike | None = None, dt: float | None = None,
+                      discount: float = 0.9999) -> LQRPolicy:
+        """The discrete LQR of ``x_{k+1} = F x_k + G u_k`` (e.g. a Kalman filter's model of a
+        vehicle and its disturbances), every state observed.
+
+        States that are not weighted and move no other state are left out (as in
+        :meth:`for_model`); a discount just below one lets marginal modes the inputs cannot move
+        (a random-walk disturbance) pass, whose feed-forward gain is then still designed.
+
+        :param q, r: diagonal state and input weights (unweighted disturbance states: 0).
+        :param x_ref: reference of every state (disturbance states: 0, their mean).
+        Other parameters as :meth:`for_model`.
+        """
+        F, G = check_matrix("F", F), check_matrix("G", G)
+        q, r = np.asarray(q, dtype=float), np.asarray(r, dtype=float)
+        n = F.shape[0]
+        moved = np.any(F - np.eye(n) != 0, axis=0)
+        keep = np.flatnonzero((q != 0) | moved)
+        gain = dlqr(F[np.ix_(keep, keep)], G[keep], np.diag(q[keep]), np.diag(r),
+                    discount=discount).K
+        K = np.zeros((G.shape[1], n))
+        K[:, keep] = gain
+        return cls(K, None, x_ref, u_ref, u_low, u_high, allocation, dt=dt)
+
+    @classmethod
     def for_env(cls, env: Any, observed: Observed = "auto", *,
                 integral: Mapping[str, float] | None = None, continuous: bool = False,
-                anti_windup: bool = True) -> LQRPolicy:
+                anti_windup: bool = True, feedforward: bool = True) -> LQRPolicy:
         """The LQR of a marine environment's model, task weights and control period.
 
         :param env: a marine environment (single or native vector), possibly wrapped.
@@ -216,6 +249,9 @@ class LQRPolicy:
         :param continuous: apply the continuous LQR gain at the environment's period instead of
             the discrete LQR of the ZOH model (to compare with continuous designs).
         :param anti_windup: see :class:`LQRPolicy`.
+        :param feedforward: behind a Kalman filter with disturbance states (``observed``
+            ``"auto"``, no ``integral``, not ``continuous``), design on the filter's augmented
+            model (:meth:`for_augmented`): feed-forward of the estimated disturbances.
         :raises ValueError: unknown ``observed``; sensors that are not states (use an
             estimator); an estimator whose states are not the model's.
         """
@@ -238,6 +274,10 @@ class LQRPolicy:
                     raise ValueError(f"the estimator's states {list(estimated)} do not start "
                                      f"with the model's {list(names)}: LQR cannot read the "
                                      "estimate")
+                if feedforward and not integral and not continuous:
+                    policy = _with_disturbances(sim, estimator)
+                    if policy is not None:
+                        return policy
                 observed, size = "state", width
             else:
                 observed = "sensors"
@@ -377,6 +417,27 @@ def _integral_spec(integral: Mapping[str, float] | None,
         raise ValueError(f"integral={dict(integral)!r} is invalid: weights must be finite and "
                          "> 0")
     return np.array([names.index(k) for k in chosen], dtype=np.intp), weights
+
+
+def _with_disturbances(sim: Any, estimator: Any) -> LQRPolicy | None:
+    """:meth:`LQRPolicy.for_augmented` on a Kalman filter's model of the vehicle and its
+    disturbance states; None when the estimator is no such filter (or no design exists)."""
+    from estimators.kalman import KalmanFilter
+
+    n_x = len(sim.model.state_names)
+    if not isinstance(estimator, KalmanFilter) or len(estimator.state_names) == n_x:
+        return None
+    n = len(estimator.state_names)
+    act = sim.actuation
+    try:
+        return LQRPolicy.for_augmented(
+            estimator.F.astype(float), estimator.G.astype(float),
+            np.concatenate([sim.task.q, np.zeros(n - n_x)]), sim.task.r,
+            x_ref=np.concatenate([sim.task.x_ref, np.zeros(n - n_x)]), u_ref=sim.task.u_ref,
+            u_low=act.low, u_high=act.high,
+            allocation=None if act.matrix is None else np.linalg.pinv(act.matrix), dt=sim.dt)
+    except ValueError:
+        return None
 
 
 def _find_estimator(env: Any) -> Any:

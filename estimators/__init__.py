@@ -1,7 +1,9 @@
 """State estimators of the source documents, batched, with Gymnasium wrappers.
 
 * :class:`KalmanFilter`, :class:`AdaptiveKalmanFilter` (the hydrofoil AKF paper):
-  :mod:`estimators.kalman`;
+  :mod:`estimators.kalman`; built for an environment with its disturbances' own models (waves,
+  current, wind, events as states; model error and prior from the env's own models),
+  :func:`disturbance_filter`: :mod:`estimators.disturbance`;
 * :class:`ExtendedKalmanFilter`, with model parameters appended to the state, and the RTS
   smoother :func:`rts_smooth` (the morphing-robot patent, the DP wave-frequency patent, the
   hovercraft EKF paper): :mod:`estimators.ekf`; its unscented variant
@@ -26,6 +28,7 @@ Every estimator follows :class:`estimators.base.Estimator` (docs/architecture.md
 """
 
 from .base import Estimator
+from .disturbance import disturbance_filter
 from .ekf import ExtendedKalmanFilter, rts_smooth
 from .kalman import AdaptiveKalmanFilter, KalmanFilter
 from .luenberger import LuenbergerObserver
@@ -38,4 +41,4 @@ __all__ = ["AdaptiveKalmanFilter", "AdaptiveWaveFilter", "Estimator", "Estimator
            "ExtendedKalmanFilter", "KalmanFilter", "LMIInfeasibleError", "LuenbergerObserver",
            "QuantizedPDObserver", "TrueStateWrapper", "UnscentedKalmanFilter",
            "VectorEstimatorWrapper", "WaveFilter", "WaveFrequencyWrapper", "design_pd_observer",
-           "rts_smooth", "wrap"]
+           "disturbance_filter", "rts_smooth", "wrap"]

@@ -76,15 +76,32 @@ def observe(env: Any, name: str) -> Any:
 
 # -- the estimators of the source documents -------------------------------------------------------
 def _kf(env: Any) -> Estimator:
-    """A Kalman filter of the env's model linearised at the reference."""
+    """A Kalman filter of the env's model and its disturbances' own models (waves, current,
+    wind, events), linearised at the reference (:mod:`estimators.disturbance`)."""
+    from .disturbance import disturbance_filter
+
+    return disturbance_filter(env)
+
+
+def _akf(env: Any) -> Estimator:
+    """The hydrofoil AKF paper's adaptive filter on the disturbance-model filter: process
+    noise switched between the model's own (``Q_min``) and ten times it (the paper's WQmax /
+    WQmin)."""
+    from .disturbance import disturbance_filter
+
+    return disturbance_filter(env, adaptive=True)
+
+
+def _kf_white(env: Any) -> Estimator:
+    """A Kalman filter of the env's model alone, its disturbances taken as white noise of their
+    sampled covariance."""
     from .kalman import KalmanFilter
 
     return KalmanFilter.for_env(env)
 
 
-def _akf(env: Any) -> Estimator:
-    """The hydrofoil AKF paper's adaptive filter: process noise switched between the sea's own
-    (``Q_min``) and ten times it (the paper's WQmax / WQmin)."""
+def _akf_white(env: Any) -> Estimator:
+    """The adaptive filter on the white-noise filter."""
     from .kalman import AdaptiveKalmanFilter, default_process_noise
 
     Q = default_process_noise(env.unwrapped.sim)
@@ -128,8 +145,10 @@ def _adaptive_wave_filter(env: Any) -> Estimator:
     return AdaptiveWaveFilter.for_env(env)
 
 
-register("kf", _kf, "a Kalman filter of the linearised model")
-register("akf", _akf, "the hydrofoil AKF paper's adaptive Kalman filter")
+register("kf", _kf, "a Kalman filter of the linearised model and its disturbances' models")
+register("akf", _akf, "the hydrofoil AKF paper's adaptive Kalman filter on kf")
+register("kf_white", _kf_white, "a Kalman filter of the linearised model, white disturbances")
+register("akf_white", _akf_white, "the adaptive Kalman filter on kf_white")
 register("ekf", _ekf, "an extended Kalman filter of the nonlinear model")
 register("pd", _pd_observer, "the USV observer patent's PD observer, USV only")
 register("wave", _wave_filter, "the wave filter with the vessel's sea, DP vessel only")

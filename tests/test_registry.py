@@ -44,7 +44,7 @@ def test_the_wave_filter_serves_the_dp_vessel_better_than_the_white_noise_kf():
     # the Kalman filter's, whose white process noise cannot separate the wave motion
     kwargs = dict(seeds=range(2), max_episode_steps=300)
     wave = evaluate("marine_envs/DPVessel-v0", "lqr", "wave", **kwargs)
-    kf = evaluate("marine_envs/DPVessel-v0", "lqr", "kf", **kwargs)
+    kf = evaluate("marine_envs/DPVessel-v0", "lqr", "kf_white", **kwargs)
     assert np.mean([r["cost"] for r in wave]) < 0.9 * np.mean([r["cost"] for r in kf])
     assert (np.mean([r["estimation_rms_north_lf"] for r in wave])
             < np.mean([r["estimation_rms_north_lf"] for r in kf]))

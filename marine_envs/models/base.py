@@ -146,12 +146,15 @@ class VehicleModel(ABC):
         raise NotImplementedError(f"{type(self).__name__} has no compiled equations")
 
     def linearize(
-        self, x0: ArrayLike | None = None, u0: ArrayLike | None = None, eps: float = 1e-6
+        self, x0: ArrayLike | None = None, u0: ArrayLike | None = None, eps: float = 1e-6,
+        d0: ArrayLike | None = None
     ) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Jacobians ``(A, B, E)`` of :meth:`rhs` at ``(x0, u0, d=0)`` by central differences."""
+        """Jacobians ``(A, B, E)`` of :meth:`rhs` at ``(x0, u0, d0)`` (default ``d0 = 0``) by
+        central differences."""
         x0 = self.x0 if x0 is None else np.asarray(x0, dtype=float)
         u0 = self.u0 if u0 is None else np.asarray(u0, dtype=float)
-        d0 = np.zeros(len(self.disturbance_names))
+        d0 = np.zeros(len(self.disturbance_names)) if d0 is None else \
+            np.asarray(d0, dtype=float)
         return tuple(  # type: ignore[return-value]
             _jacobian(lambda z, i=i: self.rhs(*_replace_arg((x0, u0, d0), i, z)), arg, eps)
             for i, arg in enumerate((x0, u0, d0))
@@ -334,7 +337,8 @@ class LinearizedModel(VehicleModel):
         return self.f0 + (x - self._x0) @ self.A.T + (u - self._u0) @ self.B.T + d @ self.E.T
 
     def linearize(self, x0: ArrayLike | None = None, u0: ArrayLike | None = None,
-                  eps: float = 0.0) -> tuple[FloatArray, FloatArray, FloatArray]:
+                  eps: float = 0.0, d0: ArrayLike | None = None
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """The matrices (the same at every point)."""
         return self.A, self.B, self.E
 

@@ -272,8 +272,10 @@ class DPVesselModel(VehicleModel):
 
     # -- dynamics ------------------------------------------------------------------------------
     def linearize(self, x0: ArrayLike | None = None, u0: ArrayLike | None = None,
-                  eps: float = 0.0) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Exact Jacobians ``(A, B, E)`` of :meth:`rhs` at ``(x0, u0, d = 0)``.
+                  eps: float = 0.0, d0: ArrayLike | None = None
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Exact Jacobians ``(A, B, E)`` of :meth:`rhs` at ``(x0, u0)`` (the disturbances enter
+        linearly: ``d0`` changes nothing).
 
         Only the heading enters nonlinearly (through R(psi)), so the derivatives are analytic;
         ``eps`` is ignored (kept for the base-class signature). ``B`` and ``E`` are constant.

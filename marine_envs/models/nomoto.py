@@ -96,7 +96,8 @@ class NomotoModel(VehicleModel):
         return np.stack(np.broadcast_arrays(k.K, k.T, k.delta0), axis=-1).astype(float)
 
     def linearize(self, x0: ArrayLike | None = None, u0: ArrayLike | None = None,
-                  eps: float = 0.0) -> tuple[FloatArray, FloatArray, FloatArray]:
+                  eps: float = 0.0, d0: ArrayLike | None = None
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Exact ``(A, B, E)``: the model is affine, so they do not depend on the point (the
         offset ``K * delta0 / T`` is ``rhs(x0, u0)``, which the exact step and
         :class:`~.base.LinearizedModel` take from :meth:`rhs`)."""

@@ -105,7 +105,8 @@ class USVModel(VehicleModel):
                                             k.Kdp, moment), axis=-1).astype(float)
 
     def linearize(self, x0: ArrayLike | None = None, u0: ArrayLike | None = None,
-                  eps: float = 0.0) -> tuple[FloatArray, FloatArray, FloatArray]:
+                  eps: float = 0.0, d0: ArrayLike | None = None
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Exact ``(A, B, E)``: the model is linear, so they do not depend on the point."""
         k = self.params
         wn2 = k.wn**2
