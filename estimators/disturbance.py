@@ -135,7 +135,7 @@ def _model_of(source: Any, names: Sequence[str], dt: float) -> DisturbanceModel:
                     np.atleast_2d(np.cov(samples, rowvar=False)))
 
 
-# one state per channel: (name, F block, C column index, Q block, P0 block)
+# a channel's block of states: (their names, F block, the channel's index, Q block, P0 block)
 _State = tuple[tuple[str, ...], FloatArray, int, FloatArray, FloatArray]
 
 
