@@ -50,10 +50,10 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     :param estimator: a registered estimator (:data:`estimators.registry.ESTIMATORS`:
         ``"kf"``, a Kalman filter of the env's model linearised at the reference and of its
         disturbances' models; ``"akf"``, the hydrofoil AKF paper's adaptive one on it;
-        ``"kf_white"``, ``"akf_white"``, the same with white disturbances; ``"ekf"``, an extended Kalman filter of the
-        nonlinear model; ``"pd"``, the USV observer patent's PD observer, USV only; ``"wave"``
-        and ``"wave_adaptive"``, the DP vessel's wave filter) turns the sensor output into the
-        policy's observation.
+        ``"kf_white"``, ``"akf_white"``, the same with white disturbances; ``"ekf"``, an
+        extended Kalman filter of the nonlinear model; ``"pd"``, the USV observer patent's PD
+        observer, USV only; ``"wave"`` and ``"wave_adaptive"``, the DP vessel's wave filter)
+        turns the sensor output into the policy's observation.
     :return: summary: return, cost, failed, RMS error of each weighted state and input (SI;
         angles in degrees), and with an estimator the RMS estimation error of every state.
     """

@@ -342,8 +342,11 @@ class KalmanFilter(Estimator):
         P = self._P
         if P.shape[0] > 1 and self._process_noise().shape[0] == 1:
             # compared as correlations: badly scaled states must agree in their own units too
-            std = np.sqrt(np.abs(np.diagonal(P[0]))) + np.finfo(self.dtype).tiny
-            spread = np.ptp(P, axis=0) / np.outer(std, std)
+            std = np.sqrt(np.abs(np.diagonal(P[0])))
+            scale, ptp = np.outer(std, std), np.ptp(P, axis=0)
+            with np.errstate(over="ignore"):  # a state known exactly: any spread is too much
+                spread = np.divide(ptp, scale, out=np.where(ptp > 0, np.inf, 0.0),
+                                   where=scale > 0)
             if spread.max() <= 16 * np.finfo(self.dtype).eps:
                 self._P = P[:1].copy()
 
