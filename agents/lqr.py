@@ -34,6 +34,7 @@ from marine_envs.models.linear import (
     check_matrix,
     check_period,
     dlqr,
+    dlqr_gain,
     lqr,
     lqr_gain,
     lqr_integral,
@@ -211,23 +212,15 @@ class LQRPolicy:
         """The discrete LQR of ``x_{k+1} = F x_k + G u_k`` (e.g. a Kalman filter's model of a
         vehicle and its disturbances), every state observed.
 
-        States that are not weighted and move no other state are left out (as in
-        :meth:`for_model`); a discount just below one lets marginal modes the inputs cannot move
-        (a random-walk disturbance) pass, whose feed-forward gain is then still designed.
+        Designed by :func:`~marine_envs.models.linear.dlqr_gain` (the states that are weighted
+        or move another; a discount just below one lets a random-walk disturbance pass, whose
+        feed-forward gain is then still designed).
 
         :param q, r: diagonal state and input weights (unweighted disturbance states: 0).
         :param x_ref: reference of every state (disturbance states: 0, their mean).
         Other parameters as :meth:`for_model`.
         """
-        F, G = check_matrix("F", F), check_matrix("G", G)
-        q, r = np.asarray(q, dtype=float), np.asarray(r, dtype=float)
-        n = F.shape[0]
-        moved = np.any(F - np.eye(n) != 0, axis=0)
-        keep = np.flatnonzero((q != 0) | moved)
-        gain = dlqr(F[np.ix_(keep, keep)], G[keep], np.diag(q[keep]), np.diag(r),
-                    discount=discount).K
-        K = np.zeros((G.shape[1], n))
-        K[:, keep] = gain
+        K = dlqr_gain(F, G, q, r, discount)
         return cls(K, None, x_ref, u_ref, u_low, u_high, allocation, dt=dt)
 
     @classmethod
@@ -452,4 +445,5 @@ def _find_estimator(env: Any) -> Any:
     return None
 
 
-__all__ = ["LQRPolicy", "LQRSolution", "dlqr", "lqr", "lqr_gain", "lqr_integral", "zoh"]
+__all__ = ["LQRPolicy", "LQRSolution", "dlqr", "dlqr_gain", "lqr", "lqr_gain", "lqr_integral",
+           "zoh"]

@@ -50,7 +50,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from marine_envs.models import zoh
-from marine_envs.models.linear import dlqr
+from marine_envs.models.linear import dlqr_gain
 from marine_envs.sea.processes import GaussMarkov, Stacked, StepEvent
 from marine_envs.sea.waves import WaveRealisation
 
@@ -349,21 +349,12 @@ def model_error_covariance(sim: Any, Phi: FloatArray, G_u: FloatArray, G_d: Floa
 
 
 def _regulator(sim: Any, Phi: FloatArray, G_u: FloatArray) -> FloatArray | None:
-    """The discrete LQR gain of ``(Phi, G_u)`` with the task's weights on the states they
-    weigh or that move the others (as :class:`agents.lqr.LQRPolicy` designs it); a discount
-    just below one lets marginal modes the inputs cannot move (a bias) pass. None where no
-    design exists."""
-    q, r = np.asarray(sim.task.q, dtype=float), np.asarray(sim.task.r, dtype=float)
-    moved = np.any(np.abs(Phi - np.eye(Phi.shape[0])) > 0, axis=0)
-    keep = np.flatnonzero((q != 0) | moved)
+    """The discrete LQR gain of ``(Phi, G_u)`` with the task's weights (as
+    :class:`agents.lqr.LQRPolicy` designs it); None where no design exists."""
     try:
-        K = dlqr(Phi[np.ix_(keep, keep)], G_u[keep], np.diag(q[keep]), np.diag(r),
-                 discount=0.999).K
+        return dlqr_gain(Phi, G_u, sim.task.q, sim.task.r, discount=0.999)
     except ValueError:
         return None
-    gain = np.zeros((G_u.shape[1], Phi.shape[0]))
-    gain[:, keep] = K
-    return gain
 
 
 def disturbance_filter(env: Any, adaptive: bool = False, adaptive_ratio: float = 10.0,

@@ -86,6 +86,27 @@ def dlqr(Ad: ArrayLike, Bd: ArrayLike, Q: ArrayLike, R: ArrayLike,
     return _solve(*_check_design(Ad, Bd, Q, R), discrete=True, discount=float(discount))
 
 
+def dlqr_gain(Ad: ArrayLike, Bd: ArrayLike, q: ArrayLike, r: ArrayLike,
+              discount: float = 0.9999) -> FloatArray:
+    """The gain ``K`` ``(n_u, n)`` of :func:`dlqr` with diagonal weights ``q`` ``(n,)`` and
+    ``r`` ``(n_u,)``, designed on the states that are weighted or move another state (the
+    others, e.g. a position only a heading's cost ignores, get no gain and would leave the
+    Riccati equation without a solution); the discount (default just below one) lets marginal
+    modes the inputs cannot move (a bias, a random-walk disturbance) pass.
+
+    :raises ValueError: as :func:`dlqr`.
+    """
+    Ad, Bd = check_matrix("Ad", Ad), check_matrix("Bd", Bd)
+    q, r = np.asarray(q, dtype=float), np.asarray(r, dtype=float)
+    n = Ad.shape[0]
+    moved = np.any(Ad - np.eye(n) != 0, axis=0)
+    keep = np.flatnonzero((q != 0) | moved)
+    K = np.zeros((Bd.shape[1], n))
+    K[:, keep] = dlqr(Ad[np.ix_(keep, keep)], Bd[keep], np.diag(q[keep]), np.diag(r),
+                      discount=discount).K
+    return K
+
+
 def dlqe(F: ArrayLike, H: ArrayLike, Q: ArrayLike,
          R: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """The steady-state Kalman filter of ``x_{k+1} = F x_k + w``, ``y_k = H x_k + v`` with
