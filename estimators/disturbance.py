@@ -349,8 +349,9 @@ def model_error_covariance(sim: Any, Phi: FloatArray, G_u: FloatArray, G_d: Floa
 
 
 def _regulator(sim: Any, Phi: FloatArray, G_u: FloatArray) -> FloatArray | None:
-    """The discrete LQR gain of ``(Phi, G_u)`` with the task's weights (as
-    :class:`agents.lqr.LQRPolicy` designs it); None where no design exists."""
+    """The discrete LQR gain of ``(Phi, G_u)`` with the task's weights (the design of
+    :class:`agents.lqr.LQRPolicy`, discounted a little more: a calibration regulator need only
+    keep the boats near the reference); None where no design exists."""
     try:
         return dlqr_gain(Phi, G_u, sim.task.q, sim.task.r, discount=0.999)
     except ValueError:

@@ -1,14 +1,8 @@
 """Smoke test of benchmarks/ekf_throughput.py: the batch equals its filters alone, table prints."""
 
-import importlib.util
-import sys
-from pathlib import Path
+from benchmark_module import load_benchmark
 
-PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "ekf_throughput.py"
-spec = importlib.util.spec_from_file_location("benchmark_ekf", PATH)
-bench = importlib.util.module_from_spec(spec)
-sys.modules[spec.name] = bench
-spec.loader.exec_module(bench)
+bench = load_benchmark("ekf_throughput")
 
 
 def test_batch_equals_filters_alone_and_table_prints():

@@ -1,19 +1,11 @@
 """Smoke test of benchmarks/estimator_throughput.py: checks pass on small sizes, table prints."""
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import pytest
+from benchmark_module import load_benchmark
 
 pytest.importorskip("filterpy")
 
-PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "estimator_throughput.py"
-# loaded under another name: "estimators" is the package the benchmark measures
-spec = importlib.util.spec_from_file_location("benchmark_estimators", PATH)
-bench = importlib.util.module_from_spec(spec)
-sys.modules[spec.name] = bench  # dataclasses look their module up
-spec.loader.exec_module(bench)
+bench = load_benchmark("estimator_throughput")
 
 
 def test_checks_pass_on_small_sizes():

@@ -1,19 +1,13 @@
 """benchmarks/real_recordings.py, the parts that need no ../shared data: the HSVA zigzag reader
 (units, signs, heading relative and unwrapped) and the plain LS fit of a linear decay."""
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from benchmark_module import load_benchmark
 
-PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "real_recordings.py"
-spec = importlib.util.spec_from_file_location("benchmark_real_recordings", PATH)
-bench = importlib.util.module_from_spec(spec)
-sys.modules[spec.name] = bench
-spec.loader.exec_module(bench)
+bench = load_benchmark("real_recordings")
 
 
 def test_zigzag_reader_and_linear_decay_fit(tmp_path):

@@ -1,18 +1,13 @@
 """benchmarks/rl_vs_lqr.py: an agent is trained, it and LQR are scored on the same seeds, the
 table prints; a barely trained agent does not pass; --evaluate-only refuses a missing agent."""
 
-import importlib.util
 import json
 import sys
-from pathlib import Path
 
 import pytest
+from benchmark_module import load_benchmark
 
-PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "rl_vs_lqr.py"
-spec = importlib.util.spec_from_file_location("benchmark_rl_vs_lqr", PATH)
-bench = importlib.util.module_from_spec(spec)
-sys.modules[spec.name] = bench
-spec.loader.exec_module(bench)
+bench = load_benchmark("rl_vs_lqr")
 
 
 def _run(monkeypatch, *args):

@@ -1,15 +1,11 @@
 """Smoke test of benchmarks/sb3_throughput.py: both backends train and step; the table prints."""
 
-import importlib.util
 import json
 import sys
-from pathlib import Path
 
-PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "sb3_throughput.py"
-spec = importlib.util.spec_from_file_location("benchmark_sb3", PATH)
-bench = importlib.util.module_from_spec(spec)
-sys.modules[spec.name] = bench
-spec.loader.exec_module(bench)
+from benchmark_module import load_benchmark
+
+bench = load_benchmark("sb3_throughput")
 
 
 def test_both_backends_are_measured_and_the_table_prints(tmp_path, monkeypatch, capsys):

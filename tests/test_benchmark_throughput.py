@@ -1,16 +1,12 @@
 """Smoke test of benchmarks/throughput.py: every case is timed against CartPole in the same
 run, the table gives min/median/max and the issue's targets, the compile times are measured."""
 
-import importlib.util
 import json
 import sys
-from pathlib import Path
 
-PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "throughput.py"
-spec = importlib.util.spec_from_file_location("benchmark_throughput", PATH)
-bench = importlib.util.module_from_spec(spec)
-sys.modules[spec.name] = bench
-spec.loader.exec_module(bench)
+from benchmark_module import load_benchmark
+
+bench = load_benchmark("throughput")
 
 
 def test_ratios_per_repeat_and_targets_are_reported(tmp_path, monkeypatch, capsys):
