@@ -199,8 +199,13 @@ def _sample(source: Any, steps: int = 2000, seed: int = 0) -> FloatArray:
     """One boat's realisation of a copy of ``source`` over ``steps`` steps (fixed seed)."""
     copy_ = copy.deepcopy(source)
     copy_.bind(1)
-    copy_.reset(np.array([0]), [np.random.default_rng(seed)])
-    return np.concatenate([copy_.step() for _ in range(steps)])
+    boat = np.array([0])
+    copy_.reset(boat, [np.random.default_rng(seed)])
+    # a block at a time, as the source's stream refills (the rows its steps would hand out)
+    chunks = [copy_.stream.blocks[0].copy()]
+    while sum(map(len, chunks)) < steps:
+        chunks.append(copy_.blocks(boat)[0])
+    return np.concatenate(chunks)[:steps]
 
 
 def _autocovariance(x: FloatArray, lags: int) -> FloatArray:
