@@ -92,6 +92,15 @@ def _akf(env: Any) -> Estimator:
     return disturbance_filter(env, adaptive=True)
 
 
+def _kf_sea(env: Any) -> Estimator:
+    """The disturbance-model filter with the sea estimated online: a bank of them over a grid
+    of peak periods and heights, weighted by their innovations' likelihood (the vehicles with
+    wave channels: the USV and the hydrofoil)."""
+    from .sea_bank import sea_bank_filter
+
+    return sea_bank_filter(env)
+
+
 def _kf_white(env: Any) -> Estimator:
     """A Kalman filter of the env's model alone, its disturbances taken as white noise of their
     sampled covariance."""
@@ -147,6 +156,7 @@ def _adaptive_wave_filter(env: Any) -> Estimator:
 
 register("kf", _kf, "a Kalman filter of the linearised model and its disturbances' models")
 register("akf", _akf, "the hydrofoil AKF paper's adaptive Kalman filter on kf")
+register("kf_sea", _kf_sea, "kf with the sea estimated online, USV and hydrofoil only")
 register("kf_white", _kf_white, "a Kalman filter of the linearised model, white disturbances")
 register("akf_white", _akf_white, "the adaptive Kalman filter on kf_white")
 register("ekf", _ekf, "an extended Kalman filter of the nonlinear model")
