@@ -41,11 +41,17 @@ from estimators.registry import ORACLE, RAW
 
 from . import evaluation
 
-ALGOS: dict[str, type[BaseAlgorithm]] = {"ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C}
+#: The algorithms by name; a string ``"module:Class"`` is imported on first use (an extra's).
+ALGOS: dict[str, type[BaseAlgorithm] | str] = {
+    "ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C,
+    "ppo_lstm": "sb3_contrib:RecurrentPPO",  # RL-Zoo's name; the `recurrent` extra
+}
+#: The extra that installs each algorithm imported on first use.
+ALGO_EXTRAS = {"ppo_lstm": "recurrent"}
 BACKENDS = ("native", "dummy")
 HYPERPARAMS = Path(__file__).with_name("hyperparams.yaml")
 #: Algorithms that learn from fresh rollouts: their returns, not only observations, are scaled.
-ON_POLICY = ("ppo", "a2c")
+ON_POLICY = ("ppo", "a2c", "ppo_lstm")
 #: First seed of the validation episodes: apart from training's (``seed``, ...) and from the
 #: evaluation seeds (0, 1, ... in ``marine evaluate`` and ``marine bench``).
 VALIDATION_SEED = 100_000
@@ -58,11 +64,28 @@ def _check_choice(name: str, value: Any, choices: Sequence[Any]) -> None:
         raise ValueError(f"{name}={value!r} is invalid: one of {tuple(choices)}")
 
 
+def algorithm(name: str) -> type[BaseAlgorithm]:
+    """The SB3 algorithm class called ``name`` (:data:`ALGOS`), importing an extra's on first
+    use; a missing extra is named."""
+    _check_choice("algo", name, tuple(ALGOS))
+    found = ALGOS[name]
+    if isinstance(found, str):
+        module, cls = found.split(":")
+        try:
+            found = getattr(importlib.import_module(module), cls)
+        except ImportError:
+            raise ValueError(f"algo {name!r} needs {module.replace('_', '-')}: pip install "
+                             f"'marine-envs[{ALGO_EXTRAS[name]}]'") from None
+        ALGOS[name] = found
+    return found
+
+
 def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[str, Any]:
     """The settings of ``algo`` on ``env_id``: the file's ``default`` section for ``algo``,
     updated with the env's own entry. Keys: ``n_timesteps``, ``n_envs``, ``policy``,
     ``normalize`` (a bool or ``VecNormalize``'s keyword arguments), optional ``policy_kwargs``,
-    ``failure_penalty`` (:class:`FailurePenalty`) and ``validation_episodes``
+    ``failure_penalty`` and ``failure_cost_to_go`` (:class:`FailurePenalty`) and
+    ``validation_episodes``
     (:class:`KeepBest`), and algorithm keyword arguments (``learning_rate`` and ``clip_range``
     may be RL-Zoo's ``"lin_<x>"``: decayed linearly to 0)."""
     _check_choice("env_id", env_id, tuple(marine_envs.ENVIRONMENTS))
@@ -212,27 +235,45 @@ class SB3VecEnv(VecEnv):
 
 class FailurePenalty(VecEnvWrapper):
     """Subtract ``penalty`` (reward units) from the reward of a step that ends its episode by
-    failure (``terminated``, not the time limit).
+    failure (``terminated``, not the time limit); with ``episode_steps``, also the steps the
+    episode had left times its mean cost a step so far (its cost-to-go had it carried on so).
 
     The marine rewards are minus a cost, so without it an agent on an unstable craft (the
-    hydrofoil) learns that crashing early is cheapest. Training only: evaluation scores the
-    task's own cost and reports failures apart.
+    hydrofoil) learns that crashing early is cheapest. A fixed penalty is not enough where a
+    poor policy's cost grows fast: an ROV drifting off its station costs ~1e4 a step, so
+    capsizing after 7 s beats any fixed penalty of that order; charged the rest of the episode at
+    its own rate, failing is no cheaper than carrying on. Training only: evaluation
+    scores the task's own cost and reports failures apart.
     """
 
-    def __init__(self, venv: VecEnv, penalty: float) -> None:
+    def __init__(self, venv: VecEnv, penalty: float, episode_steps: int | None = None) -> None:
         if not (math.isfinite(penalty) and penalty >= 0):
             raise ValueError(f"failure_penalty={penalty!r} is invalid: a finite number >= 0")
+        if episode_steps is not None and not (isinstance(episode_steps, int)
+                                              and episode_steps >= 1):
+            raise ValueError(f"episode_steps={episode_steps!r} is invalid: an integer >= 1")
         super().__init__(venv)
-        self.penalty = float(penalty)
+        self.penalty, self.episode_steps = float(penalty), episode_steps
+        self._steps = np.zeros(venv.num_envs, dtype=np.int64)  # into each boat's episode
+        self._cost = np.zeros(venv.num_envs)  # each boat's episode cost so far
 
     def reset(self) -> VecEnvObs:
+        self._steps[:], self._cost[:] = 0, 0.0
         return self.venv.reset()
 
     def step_wait(self) -> VecEnvStepReturn:
         obs, rewards, dones, infos = self.venv.step_wait()
-        failed = [bool(d and not info.get("TimeLimit.truncated", False))
-                  for d, info in zip(dones, infos, strict=True)]
-        return obs, rewards - self.penalty * np.asarray(failed, dtype=np.float32), dones, infos
+        self._steps += 1
+        self._cost -= rewards
+        failed = np.array([bool(d and not info.get("TimeLimit.truncated", False))
+                           for d, info in zip(dones, infos, strict=True)])
+        charge = np.full(len(dones), self.penalty)
+        if self.episode_steps is not None:
+            left = np.maximum(self.episode_steps - self._steps, 0)
+            charge += left * np.maximum(self._cost / self._steps, 0.0)
+        done = np.asarray(dones, dtype=bool)
+        self._steps[done], self._cost[done] = 0, 0.0
+        return obs, (rewards - charge * failed).astype(np.float32), dones, infos
 
 
 class KeepBest(BaseCallback):
@@ -384,6 +425,7 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
     normalize_kwargs = dict(normalize) if isinstance(normalize, Mapping) else {}
     normalize = bool(normalize)
     penalty = float(params.pop("failure_penalty", 0.0))
+    cost_to_go = bool(params.pop("failure_cost_to_go", False))
     for key in ("learning_rate", "clip_range"):
         if key in params:
             params[key] = _schedule(params[key])
@@ -395,14 +437,15 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
                       max_episode_steps) if validation_episodes else None
     out.mkdir(parents=True, exist_ok=True)
     venv = make_vec_env(env_id, n_envs, estimator, seed, backend, max_episode_steps)
-    if penalty:
-        venv = FailurePenalty(venv, penalty)
+    if penalty or cost_to_go:
+        steps = evaluation.episode_steps(env_id, max_episode_steps) if cost_to_go else None
+        venv = FailurePenalty(venv, penalty, steps)
     if normalize:  # rewards too only on-policy: a replay buffer would keep stale scales
         normalize_kwargs = {"gamma": params.get("gamma", 0.99), "norm_reward": algo in ON_POLICY,
                             **normalize_kwargs}
         venv = VecNormalize(venv, **normalize_kwargs)
     tensorboard = str(out / "tb") if _importable("tensorboard") else None
-    model = ALGOS[algo](policy, venv, seed=seed, device="cpu", verbose=0,
+    model = algorithm(algo)(policy, venv, seed=seed, device="cpu", verbose=0,
                         tensorboard_log=tensorboard, **params)
     callbacks: list[BaseCallback] = [CheckpointCallback(
         every, str(out / "checkpoints"), name_prefix="model", save_vecnormalize=normalize)]
@@ -438,25 +481,41 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
 @dataclasses.dataclass
 class Agent:
     """A trained model with SB3's ``predict``, fed single-env observations; normalises them as
-    in training (frozen statistics) when training used ``VecNormalize``."""
+    in training (frozen statistics) when training used ``VecNormalize``.
+
+    A recurrent policy's memory is carried by the agent when the caller passes no ``state``
+    (the evaluation loops, written for memoryless policies, drop it); ``episode_start`` clears
+    it, as for the LQR's integrators."""
 
     model: BaseAlgorithm
     normalizer: VecNormalize | None
     config: dict[str, Any]
+    memory: Any = dataclasses.field(default=None, repr=False)
 
     def predict(self, observation: np.ndarray, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, Any]:
         obs = np.asarray(observation)
         if self.normalizer is not None:
             obs = self.normalizer.normalize_obs(obs)
-        return self.model.predict(obs, state, episode_start, deterministic)
+        if state is not None or not self.recurrent:
+            return self.model.predict(obs, state, episode_start, deterministic)
+        rows = obs.shape[0] if obs.ndim > 1 else 1
+        memory = self.memory if self.memory is not None and \
+            self.memory[0].shape[1] == rows else None  # a new batch starts afresh
+        action, self.memory = self.model.predict(obs, memory, episode_start, deterministic)
+        return action, self.memory
+
+    @property
+    def recurrent(self) -> bool:
+        """Whether the policy has a memory (sb3-contrib's recurrent policies)."""
+        return hasattr(self.model.policy, "lstm_hidden_state_shape")
 
 
 def load_agent(out: Path) -> Agent:
     """The agent :func:`train` saved into ``out``."""
     out = Path(out)
     config = json.loads((out / "config.json").read_text())
-    model = ALGOS[config["algo"]].load(out / "model.zip", device="cpu")
+    model = algorithm(config["algo"]).load(out / "model.zip", device="cpu")
     normalizer = None
     if (out / "vecnormalize.pkl").exists():
         # unpickled without its env: only its statistics are used, never updated

@@ -165,3 +165,55 @@ def test_a_failure_costs_the_penalty_and_the_time_limit_does_not():
     assert failed.any()
     with pytest.raises(ValueError, match="failure_penalty"):
         FailurePenalty(plain, -1.0)
+
+
+def test_a_failure_with_cost_to_go_costs_the_rest_of_its_episode_at_its_own_rate():
+    from agents.sb3 import FailurePenalty
+
+    steps = 400
+    venv = make_vec_env("marine_envs/Hydrofoil-v0", 2, seed=0, max_episode_steps=steps)
+    plain = make_vec_env("marine_envs/Hydrofoil-v0", 2, seed=0, max_episode_steps=steps)
+    penalised = FailurePenalty(venv, 100.0, episode_steps=steps)
+    penalised.reset(), plain.reset()
+    action = np.zeros((2, 2), dtype=np.float32)  # foils held: the unstable craft broaches
+    cost = np.zeros(2)
+    for k in range(1, steps + 1):
+        _, reward, done, infos = penalised.step(action)
+        _, base, _, _ = plain.step(action)
+        cost -= base
+        failed = done & ~np.array([i.get("TimeLimit.truncated", False) for i in infos])
+        expected = base - failed * (100.0 + (steps - k) * cost / k)
+        np.testing.assert_allclose(reward, expected, rtol=1e-5)
+        if failed.any():
+            break
+    assert failed.any() and k < steps
+    with pytest.raises(ValueError, match="episode_steps"):
+        FailurePenalty(plain, 1.0, episode_steps=0)
+
+
+def test_a_recurrent_agent_carries_its_memory_and_clears_it_at_an_episode_start(tmp_path):
+    pytest.importorskip("sb3_contrib")
+    out = tmp_path / "lstm"
+    train(USV, "ppo_lstm", timesteps=256, out=out, n_envs=2, progress_bar=False,
+          hyperparams={"n_steps": 128, "batch_size": 256, "n_epochs": 1})
+    agent = load_agent(out)
+    assert agent.recurrent
+    obs = np.random.default_rng(0).normal(size=(3, 2, *agent.model.observation_space.shape))
+    first = [agent.predict(o, episode_start=np.array([k == 0] * 2))[0] for k, o in enumerate(obs)]
+    again = [agent.predict(o, episode_start=np.array([k == 0] * 2))[0] for k, o in enumerate(obs)]
+    np.testing.assert_array_equal(first, again)  # the start cleared what the first run left
+    # the memory matters: the same observation after another history gives another action
+    agent.predict(obs[1], episode_start=np.array([True, True]))
+    other = agent.predict(obs[0])[0]
+    assert not np.array_equal(other, first[0])
+    # a batch of another size starts afresh rather than failing on the old memory's shape
+    action, _ = agent.predict(obs[0][:1], episode_start=np.array([True]))
+    assert action.shape == (1, *agent.model.action_space.shape)
+
+
+def test_an_algorithm_of_a_missing_extra_is_named(monkeypatch):
+    from agents import sb3
+
+    monkeypatch.setitem(sb3.ALGOS, "ppo_lstm", "no_such_module:RecurrentPPO")
+    with pytest.raises(ValueError, match=r"needs no-such-module: pip install .*\[recurrent\]"):
+        sb3.algorithm("ppo_lstm")
