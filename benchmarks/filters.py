@@ -15,14 +15,23 @@ and 32 times their noise. Two seed sets: the one the filter's settings were chos
 A cell whose episodes failed shows how many (``k/6 fail``): a crash ends the cost early, so its
 cost does not compare. Writes a figure of cost against the noise factor per vehicle.
 
+With ``--agents DIR ...`` (agents saved by ``marine train`` or ``benchmarks/rl_vs_lqr.py``, e.g.
+PPO behind ``kf`` and the recurrent PPO on the raw sensors), each (algorithm, estimator) of a
+vehicle is a column too, "ppo on kf": the agents trained at the default sensors, scored on the
+same seeds and sensors as LQR behind the estimator they were trained behind (the mean over the
+agents given, their failed episodes summed).
+
     python benchmarks/filters.py [--vehicles USV ROV] [--sets tuning held_out]
-                                 [--plot docs/filters.png] [--json out.json]
+                                 [--agents runs/rl_vs_lqr/*] [--plot docs/filters.png]
+                                 [--json out.json]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -30,6 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 import marine_envs  # noqa: F401
+from agents import sb3
 from agents.benchmark.grid import sensor_kwargs
 from agents.evaluation import evaluate
 
@@ -41,25 +51,44 @@ SEED_SETS = {"tuning": range(1000, 1006), "held_out": range(2000, 2006)}
 BOUND = {"ROV": ("raw", 0.9), "DPVessel": ("true", 1.3)}
 
 
-def cell(vehicle: str, estimator: str, sensors: str, seeds: range) -> dict[str, Any]:
-    """LQR's mean cost and failed episodes behind ``estimator``; None where LQR cannot read
-    what it gives (the DP vessel's raw sensors are not its states)."""
+def cell(vehicle: str, estimator: str, sensors: str, seeds: range,
+         agents: Sequence[sb3.Agent] = ()) -> dict[str, Any]:
+    """LQR's (or the ``agents``') mean cost and failed episodes behind ``estimator``; None
+    where LQR cannot read what it gives (the DP vessel's raw sensors are not its states)."""
     env_id = f"marine_envs/{vehicle}-v0"
     kwargs = sensor_kwargs(sensors, gym.make(env_id).unwrapped.sim.sensors)
+    policies = [(lambda venv, a=agent: a) for agent in agents] or ["lqr"]
     try:
-        rows = evaluate(env_id, "lqr", estimator, seeds, env_kwargs=kwargs)
+        rows = [r for policy in policies
+                for r in evaluate(env_id, policy, estimator, seeds, env_kwargs=kwargs)]
     except ValueError as error:
         return {"cost": None, "failed": 0, "why": str(error).split(";")[0]}
     return {"cost": float(np.mean([r["cost"] for r in rows])),
             "failed": int(sum(r["failed"] for r in rows)), "episodes": len(rows)}
 
 
-def run(vehicles: list[str], sets: list[str]) -> dict[str, Any]:
-    jobs = [(s, v, n, e) for s in sets for v in vehicles for n in SENSORS for e in ESTIMATORS]
+def agent_columns(paths: Sequence[Path]) -> dict[str, dict[str, list[sb3.Agent]]]:
+    """``{vehicle: {"ALGO on ESTIMATOR": [agents]}}`` of the agents saved in ``paths``."""
+    columns: dict[str, dict[str, list[sb3.Agent]]] = {}
+    for path in paths:
+        agent = sb3.load_agent(path)
+        vehicle = agent.config["env_id"].split("/")[1].removesuffix("-v0")
+        name = f"{agent.config['algo']} on {agent.config['estimator'] or 'raw'}"
+        columns.setdefault(vehicle, {}).setdefault(name, []).append(agent)
+    return columns
+
+
+def run(vehicles: list[str], sets: list[str],
+        agents: dict[str, dict[str, list[sb3.Agent]]] | None = None) -> dict[str, Any]:
+    agents = agents or {}
+    jobs = [(s, v, n, e) for s in sets for v in vehicles for n in SENSORS
+            for e in (*ESTIMATORS, *agents.get(v, {}))]
     results: dict[str, Any] = {}
-    for seed_set, vehicle, sensors, estimator in tqdm(jobs, desc="LQR episodes", unit="cell"):
+    for seed_set, vehicle, sensors, column in tqdm(jobs, desc="episodes", unit="cell"):
+        trained = agents.get(vehicle, {}).get(column, [])
+        estimator = column.split(" on ")[1] if trained else column
         results.setdefault(seed_set, {}).setdefault(vehicle, {}).setdefault(sensors, {})[
-            estimator] = cell(vehicle, estimator, sensors, SEED_SETS[seed_set])
+            column] = cell(vehicle, estimator, sensors, SEED_SETS[seed_set], trained)
     return results
 
 
@@ -69,13 +98,21 @@ def _text(c: dict[str, Any]) -> str:
     return f"{c['failed']}/{c['episodes']} fail" if c["failed"] else f"{c['cost']:.0f}"
 
 
+def _columns(results: dict[str, Any]) -> list[str]:
+    """The estimators, then every agent column of any vehicle, in order of appearance."""
+    names = [c for by_sensors in results.values() for cells in by_sensors.values()
+             for c in cells]
+    return list(ESTIMATORS) + [c for c in dict.fromkeys(names) if c not in ESTIMATORS]
+
+
 def table(results: dict[str, Any]) -> str:
-    lines = ["| vehicle | sensors | " + " | ".join(ESTIMATORS) + " |",
-             "|---|---|" + "---|" * len(ESTIMATORS)]
+    columns = _columns(results)
+    lines = ["| vehicle | sensors | " + " | ".join(columns) + " |",
+             "|---|---|" + "---|" * len(columns)]
     for vehicle, by_sensors in results.items():
         for sensors, cells in by_sensors.items():
-            lines.append(f"| {vehicle} | {sensors} | "
-                         + " | ".join(_text(cells[e]) for e in ESTIMATORS) + " |")
+            lines.append(f"| {vehicle} | {sensors} | " + " | ".join(
+                _text(cells[c]) if c in cells else "" for c in columns) + " |")
     return "\n".join(lines)
 
 
@@ -113,14 +150,17 @@ def plot(results: dict[str, Any], path: str) -> None:
     for ax, vehicle in zip(axes[0], vehicles, strict=True):
         by_sensors = results[vehicle]
         factors = [1.0 if s == "default" else float(s.split("=")[1]) for s in by_sensors]
-        for estimator in ESTIMATORS:
-            costs = [c[estimator]["cost"] if c[estimator]["cost"] is not None and
-                     not c[estimator]["failed"] else np.nan for c in by_sensors.values()]
-            ax.plot(factors, costs, "o-", label=estimator)
+        for column in _columns({vehicle: by_sensors}):
+            costs = [c[column]["cost"] if column in c and c[column]["cost"] is not None and
+                     not c[column]["failed"] else np.nan for c in by_sensors.values()]
+            style = "o-" if column in ESTIMATORS else "s--"  # LQR solid, agents dashed
+            ax.plot(factors, costs, style, label=column if column in ESTIMATORS else
+                    f"{column} (agent)")
         ax.set(xscale="log", yscale="log", title=vehicle, xlabel="sensor noise x default")
         ax.set_xticks(factors, [f"{f:g}" for f in factors])
-    axes[0][0].set_ylabel("LQR cost (held-out seeds)")
-    axes[0][-1].legend(fontsize=8)
+    axes[0][0].set_ylabel("cost (held-out seeds); LQR behind each estimator")
+    for ax in axes[0]:
+        ax.legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
 
@@ -132,12 +172,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--vehicles", nargs="+", default=list(VEHICLES), choices=VEHICLES)
     parser.add_argument("--sets", nargs="+", default=list(SEED_SETS), choices=list(SEED_SETS))
     parser.add_argument("--plot", default="docs/filters.png", help="figure path ('' for none)")
+    parser.add_argument("--agents", nargs="+", type=Path, default=[], metavar="DIR",
+                        help="trained agents' folders: a column per algorithm and estimator")
     parser.add_argument("--json", help="write the results here")
     args = parser.parse_args(argv)
-    results = run(args.vehicles, args.sets)
+    missing = [str(d) for d in args.agents if not (d / "config.json").exists()]
+    if missing:
+        parser.error(f"--agents: no trained agent (config.json) in {', '.join(missing)}")
+    results = run(args.vehicles, args.sets, agent_columns(args.agents))
     for seed_set, by_vehicle in results.items():
         seeds = SEED_SETS[seed_set]
-        print(f"\n{seed_set} seeds {seeds.start}-{seeds.stop - 1}, LQR cost (mean):\n")
+        print(f"\n{seed_set} seeds {seeds.start}-{seeds.stop - 1}, cost (mean; LQR behind "
+              "each estimator, agents behind theirs):\n")
         print(table(by_vehicle))
         print()
         for what, ok, numbers in checks(by_vehicle):
