@@ -28,6 +28,10 @@ ANGLE_ARGUMENTS = ("wave_heading", "wind_direction", "course")
 REFERENCE_ARGUMENTS = ("setpoint", "reference")
 #: Recorded inputs more than this many times the model's input bound are implausible.
 BEYOND_BOUND = 2.0
+#: Channels that are headings: unwrapped over many turns they may exceed 2 pi.
+HEADINGS = ("psi",)
+#: Heading -> its rate channel, compared by :func:`heading_rate`.
+HEADING_RATES = {"psi": "r"}
 #: Units of the scale arguments, for the messages.
 _UNITS = {"dt": "s", "hs": "m", "wind_speed": "m/s", "wind_gust": "m/s", "current_std": "m/s"}
 DEGREE = math.pi / 180
@@ -101,12 +105,34 @@ def recorded_values(name: str, values: np.ndarray, si_unit: str, declared: str |
         # the numbers as written already fit the bound in radians
         return (f"{name}: {peak:.3g} rad is {peak / bound:.1%} of the model's bound "
                 f"{bound:.3g} rad: radians declared as deg?")
-    if si_unit == "rad" and peak > TWO_PI:
-        turn = " (or a heading unwrapped over more than a turn)" if name.startswith("psi") \
-            else ""
+    # a heading may be unwrapped over many turns (a hovercraft spinning): see heading_rate
+    if si_unit == "rad" and peak > TWO_PI and not name.startswith(HEADINGS):
         return (f"{name}: {peak:.3g} rad exceeds 2 pi: "
-                f"{'degrees declared as rad' if declared == 'rad' else 'a unit mistake'}?{turn}")
+                f"{'degrees declared as rad' if declared == 'rad' else 'a unit mistake'}?")
     return ""
+
+
+def heading_rate(heading: str, psi: np.ndarray, rate: str, r: np.ndarray, time: np.ndarray
+                 ) -> str:
+    """Why a recorded heading ``psi`` (rad) and its rate ``r`` (rad/s) disagree on the unit,
+    or ``""``: the (unwrapped) heading regressed on the integral of the rate, where both are
+    known, more than :data:`BEYOND_BOUND` times it (degrees declared as rad?). Integrating
+    averages the sensors' noise out; a heading the rate does not explain says nothing."""
+    keep = np.isfinite(psi) & np.isfinite(r)
+    if keep.sum() < 10:
+        return ""
+    t, turn = time[keep], r[keep]
+    turned = np.concatenate([[0.0], np.cumsum(0.5 * (turn[1:] + turn[:-1]) * np.diff(t))])
+    course = np.unwrap(psi[keep])
+    turned, course = turned - turned.mean(), course - course.mean()
+    if not np.std(turned) > 0 or not np.std(course) > 0 \
+            or np.corrcoef(course, turned)[0, 1] < 0.5:
+        return ""
+    gain = float(course @ turned / (turned @ turned))
+    if gain <= BEYOND_BOUND:
+        return ""
+    return (f"{heading}: turns {gain:.0f}x more than the rate {rate} says: degrees declared "
+            f"as rad (or {rate} in the wrong unit)?")
 
 
 def _unit_hint(si_unit: str, declared: str, peak: float, bound: float) -> str:
@@ -114,12 +140,15 @@ def _unit_hint(si_unit: str, declared: str, peak: float, bound: float) -> str:
     from .recording import UNIT_CONVERSIONS  # here: recording imports this module
 
     if declared == si_unit:
-        # the unit whose conversion brings the peak within the bound, the smallest change first
+        # a unit whose conversion brings the peak to a tenth of the bound or more, within
+        # it; the smallest change first
         fits = sorted((factor, unit) for unit, (si, factor) in UNIT_CONVERSIONS.items()
-                      if si == si_unit and factor < 1 and peak * factor <= BEYOND_BOUND * bound)
+                      if si == si_unit and factor < 1
+                      and 0.1 * bound <= peak * factor <= BEYOND_BOUND * bound)
         if fits:
             return f"{fits[-1][1].replace('deg', 'degrees')} declared as {declared}?"
     return "a unit mistake, or not the model's input?"
 
 
-__all__ = ["PlausibilityWarning", "environment_arguments", "recorded_values", "warn"]
+__all__ = ["PlausibilityWarning", "environment_arguments", "heading_rate", "recorded_values",
+           "warn"]

@@ -50,3 +50,22 @@ def test_a_dp_setpoint_that_is_not_a_mapping_names_the_format():
         gym.make("marine_envs/DPVessel-v0", setpoint=(0, 0, 180))
     with pytest.warns(PlausibilityWarning, match="setpoint psi=180 rad is beyond 2 pi"):
         gym.make("marine_envs/DPVessel-v0", setpoint={"psi": 180})
+
+
+def test_a_heading_in_degrees_is_told_from_one_unwrapped_over_many_turns():
+    from pathlib import Path
+
+    import numpy as np
+
+    from agents.simulate import simulate
+    from marine_envs.recording import Recording, read_recording
+
+    real = Path(marine_envs.__file__).parent / "data" / "real"
+    for path in real.glob("hovercraft_*.csv"):  # up to 19 turns, in rad: plausible
+        rec = read_recording(path, require_uniform=False)
+        assert np.abs(rec.data["psi"]).max() > 40 and rec.warnings == []
+    rec = simulate("marine_envs/USV-v0", 400, seed=1, policy="lqr")
+    assert rec.warnings == []
+    data = rec.data.assign(psi=np.degrees(rec.data["psi"]))
+    (line,) = Recording(data, "usv", rec.params).warnings
+    assert line.startswith("psi: turns 5") and "degrees declared as rad" in line
