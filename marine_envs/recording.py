@@ -66,6 +66,7 @@ Parquet support needs pyarrow: ``pip install "marine-envs[parquet]"``.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 from collections.abc import Callable, Mapping
@@ -257,6 +258,7 @@ class Recording:
             data.loc[gap, name] = values
         out = Recording(data, self.model, self.params, self.meta, require_uniform=False)
         out.gaps = missing if missing.any() else None
+        out.warnings = list(self.warnings)  # read with the file's declared units
         return out
 
     def window(self, start: float | None = None, stop: float | None = None,
@@ -291,6 +293,7 @@ class Recording:
         out = Recording(self.data.iloc[rows], self.model, self.params, meta,
                         require_uniform=False)
         out.gaps = None if self.gaps is None else self.gaps[rows]
+        out.warnings = list(self.warnings)  # read with the file's declared units
         return out
 
     # -- views ---------------------------------------------------------------------------------
@@ -506,13 +509,22 @@ def _si_factor(column: str, unit: Any, expected: str) -> float:
 
 
 def check_suffix(path: str | Path) -> Path:
-    """``path`` as a Path if its suffix names a recording format (.csv, .parquet).
+    """``path`` as a Path if its suffix names a recording format (.csv, .parquet) that can be
+    written here (Parquet needs pyarrow).
 
     :raises ValueError: any other suffix (before any work is done, e.g. a long simulation).
+    :raises ImportError: a Parquet file without pyarrow installed.
     """
     path = Path(path)
     _format(path)
+    if path.suffix.lower() == ".parquet" and importlib.util.find_spec("pyarrow") is None:
+        raise ImportError(_PARQUET_HINT)
     return path
+
+
+def sidecar(path: str | Path) -> Path:
+    """The JSON sidecar :func:`write_recording` writes beside a CSV ``path``."""
+    return _sidecars(Path(path))[0]
 
 
 def _format(path: Path) -> tuple[Callable[..., None], Callable[[Path], Any]]:
