@@ -97,12 +97,27 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     _check_choice("algo", algo, tuple(ALGOS))
     import yaml  # here: only reading the settings needs PyYAML
 
-    table = yaml.safe_load(path.read_text())
-    params = dict(table.get("default", {}).get(algo, {}))
-    params.update(table.get(env_id, {}).get(algo, {}) or {})
+    try:
+        table = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as error:
+        raise ValueError(f"{path}: invalid YAML: {_one_line(error)}") from None
+    if not isinstance(table, dict) or not all(isinstance(v, dict) for v in table.values()):
+        raise ValueError(f"{path}: must map env ids (and 'default') to algorithms to settings, "
+                         "as agents/hyperparams.yaml does")
+    sections = [table.get(key, {}).get(algo) or {} for key in ("default", env_id)]
+    if not all(isinstance(section, dict) for section in sections):
+        raise ValueError(f"{path}: the settings of {algo!r} must be a mapping of names to values")
+    params = {**sections[0], **sections[1]}
     if not params:
         raise ValueError(f"{path} has no settings for algo {algo!r} (nor a default)")
+    missing = [key for key in ("n_timesteps", "n_envs", "policy") if key not in params]
+    if missing:
+        raise ValueError(f"{path}: the settings of {algo!r} on {env_id} lack {missing}")
     return params
+
+
+def _one_line(error: BaseException) -> str:
+    return " ".join(str(error).split())
 
 
 def _schedule(value: Any) -> Any:
