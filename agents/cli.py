@@ -74,7 +74,10 @@ the JSON (--json, or diagnosis.json in --report):
   parameters {name: {value, std, status}}, correlations}, model_check (the record's natural
   frequency and damping against the model's modes), unexplained {channel: {rmse,
   share_of_signal}}, alternatives (terms the data cannot tell apart, and the test that would),
-  and each finding's standard_form (B1 B2 B3 damping, C1 C3 restoring, per unit inertia)
+  and each finding's standard_form (B1 B2 B3 damping, C1 C3 restoring, per unit inertia);
+  warnings (values that look like unit mistakes, e.g. a rudder 57x its bound: degrees
+  declared as rad?) and missing_samples {channel: n} (empty or NaN cells of a measured channel:
+  samples the logger dropped, taken as missing measurements) when there are any
 """
 
 
@@ -170,11 +173,12 @@ def json_object(text: str) -> dict[str, Any]:
 
 
 def _output_file(path: str | None, force: bool, option: str,
-                 suffixes: Sequence[str] | None = None, companions: Sequence[Path] = ()
-                 ) -> Path | None:
+                 suffixes: Sequence[str] | None = None, companions: Sequence[Path] = (),
+                 creates: Path | None = None) -> Path | None:
     """``path``, a file the command will write, checked before any work: a known suffix, an
-    existing writable folder, not a folder itself; an existing file (or one of its
-    ``companions``, e.g. a CSV's sidecar) is refused unless ``force``.
+    existing writable folder (or ``creates``, an output folder the command makes, or one in
+    it), not a folder itself; an existing file (or one of its ``companions``, e.g. a CSV's
+    sidecar) is refused unless ``force``.
 
     :raises ValueError: a bad suffix or folder.  :raises FileExistsError: it exists.
     """
@@ -185,9 +189,11 @@ def _output_file(path: str | None, force: bool, option: str,
         raise ValueError(f"{option} {path}: unknown format {out.suffix or '(no suffix)'!r}: "
                          f"one of {', '.join(suffixes)}")
     folder = out.parent
-    if not folder.is_dir():
+    made = creates is not None and Path(creates).resolve() in (folder.resolve(),
+                                                               *folder.resolve().parents)
+    if not folder.is_dir() and not made:
         raise ValueError(f"{option} {path}: the folder {folder} does not exist")
-    if not os.access(folder, os.W_OK | os.X_OK):
+    if folder.is_dir() and not os.access(folder, os.W_OK | os.X_OK):
         raise ValueError(f"{option} {path}: the folder {folder} is not writable")
     if out.is_dir():
         raise ValueError(f"{option} {path} is a folder, not a file")
@@ -575,9 +581,13 @@ def _bench(args: argparse.Namespace) -> int:
     resuming = (out / "grid.json").is_file() and not args.force  # a rerun resumes (documented)
     if not resuming:
         _output_dir(args.out, args.force, "--out", _bench_owned, " (without its grid.json)")
-    json_out = _output_file(args.json, args.force, "--json")
+    # resuming, the grid's own summaries inside --out (e.g. --report bench/report) are redone
+    def own(path: str | None) -> bool:
+        return resuming and path is not None and out.resolve() in Path(path).resolve().parents
+
+    json_out = _output_file(args.json, args.force or own(args.json), "--json", creates=out)
     report = None if args.report is None else _output_dir(
-        args.report, args.force, "--report",
+        args.report, args.force or own(args.report), "--report",
         lambda d: ["index.html"] if (d / "index.html").exists() else [])
     if resuming:
         before = json.loads((out / "grid.json").read_text())
@@ -602,6 +612,7 @@ def _bench(args: argparse.Namespace) -> int:
         written.append(write_report(rows, out, report, grid))
     if json_out is not None:
         records = json.loads(rows.to_json(orient="records"))
+        json_out.parent.mkdir(parents=True, exist_ok=True)  # inside --out: made with it
         json_out.write_text(json.dumps({"rows": records}, indent=1) + "\n")
         written.append(json_out)
     print("wrote " + ", ".join(map(str, written)))

@@ -181,3 +181,15 @@ def test_the_installed_entry_point_reports_the_same_line():
         "marine episode: error: argument env: 'CartPole-v1' is not a marine environment: one "
         "of marine_envs/USV-v0, marine_envs/Hydrofoil-v0, marine_envs/ROV-v0, "
         "marine_envs/DPVessel-v0, marine_envs/Hovercraft-v0 (see marine episode --help)"]
+
+
+def test_the_demo_rewrites_its_own_figure_but_not_one_the_user_names(tmp_path, monkeypatch,
+                                                                     capsys):
+    monkeypatch.chdir(tmp_path)
+    for _ in range(2):  # the README's first command, run twice
+        assert main(["demo", "--seconds", "5"]) == 0
+    assert (tmp_path / "marine_demo.png").stat().st_size > 10_000
+    named = tmp_path / "mine.png"
+    assert main(["demo", "--seconds", "5", "--plot", str(named)]) == 0
+    code, _, err = run_cli(["demo", "--seconds", "5", "--plot", str(named)], capsys)
+    assert code == 2 and "mine.png exists: use --force" in err
