@@ -804,7 +804,9 @@ def build_parser() -> argparse.ArgumentParser:
                     "--resume DIR continues from the last saved agent with its step count.")
     train.add_argument("env_id", nargs="?", type=env_id,
                        help="environment id, e.g. marine_envs/USV-v0 (or USV-v0)")
-    train.add_argument("--algo", choices=tuple(ALGOS), help="ppo, sac, td3 or a2c (default ppo)")
+    train.add_argument("--algo", choices=tuple(ALGOS),
+                       help="ppo, sac, td3, a2c or ppo_lstm (sb3-contrib's RecurrentPPO: the "
+                            "recurrent extra); default ppo")
     train.add_argument("--estimator", choices=registry.names(), metavar="ESTIMATOR",
                        help="what the agent sees: raw (the sensors, the default), true (the "
                             f"true state) or an estimator: {registry.describe()}")
