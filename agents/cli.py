@@ -281,9 +281,9 @@ def _bar(total: int, description: str, show: bool) -> Iterator[Any]:
 def _demo(args: argparse.Namespace) -> int:
     from .demo import format_table, roll_reduction, run_demo
 
-    # the demo's own figure is rewritten; a path the user names is protected
-    plot = None if args.no_plot else _plot_path(args.plot, args.force) if args.plot \
-        else _plot_path(DEMO_PLOT, True)
+    plot = None
+    if not args.no_plot:  # the demo's own figure is rewritten; a path the user names is kept
+        plot = _plot_path(args.plot, args.force) if args.plot else _plot_path(DEMO_PLOT, True)
     out = _output_file(args.json, args.force, "--json")
     summary = run_demo(seconds=args.seconds, seed=args.seed, hs=args.hs, plot=plot)
     print(f"USV-v0, Hs = {args.hs} m, stern-quartering sea, {args.seconds:g} s, seed {args.seed}")

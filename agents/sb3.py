@@ -693,7 +693,7 @@ def latest(run: Path) -> Saved:
     config = read_config(run)
     candidates = [(steps, 1, path) for steps, path in checkpoints(run)]
     last = Path(run) / ("last_model.zip" if config.get("validation") else "model.zip")
-    if config.get("status") in (INTERRUPTED, COMPLETE) and last.exists():
+    if config.get("status", COMPLETE) in (INTERRUPTED, COMPLETE) and last.exists():  # older: none
         candidates.append((int(config["timesteps"]), 2, last))  # the same steps: it wins
     if not candidates:
         raise ValueError(f"{run} holds no saved agent to resume from (no model, no checkpoint)")
@@ -781,25 +781,29 @@ def _run(config: dict[str, Any], out: Path, saved: Saved | None, progress_bar: b
     """Train (or go on training ``saved``) to ``config["target_timesteps"]``, save and
     rewrite ``config.json``; Ctrl-C stops at the next step and saves the same way. The folder
     is created (a new run's old files cleared) and ``config.json`` written once the
-    environments are built: a setting they refuse leaves no trace."""
+    environments and the model are built: a setting they refuse leaves no trace."""
     algo, target = config["algo"], int(config["target_timesteps"])
     params, policy, normalize, normalize_kwargs, penalty, episodes = _algorithm_kwargs(config)
     venv = _environments(config, saved, params, normalize, normalize_kwargs, penalty)
-    if saved is None:
-        clear_run(out)
-    out.mkdir(parents=True, exist_ok=True)
-    _write_config(out, config)
     tensorboard = str(out / "tb") if _importable("tensorboard") else None
     start = 0 if saved is None else int(saved.timesteps or 0)
     if saved is None:
-        model = algorithm(algo)(policy, venv, seed=config["seed"], device="cpu", verbose=0,
-                                tensorboard_log=tensorboard, **params)
+        try:
+            model = algorithm(algo)(policy, venv, seed=config["seed"], device="cpu", verbose=0,
+                                    tensorboard_log=tensorboard, **params)
+        except TypeError as error:  # a setting the algorithm does not take (a typo?)
+            venv.close()
+            raise ValueError(f"{config.get('hyperparams_file', 'the settings')}: {algo}: "
+                             f"{error}") from None
+        clear_run(out)
     else:
         schedules = {k: params[k] for k in ("learning_rate", "clip_range") if k in params}
         model = algorithm(algo).load(saved.model, env=venv, device="cpu",
                                      custom_objects=schedules, tensorboard_log=tensorboard)
         model.num_timesteps = start
         model.set_random_seed(config["seed"] + start)
+    out.mkdir(parents=True, exist_ok=True)
+    _write_config(out, config)
     with _SigintStops() as sigint:
         keeper = _keeper(config, out, episodes, sigint)
         callbacks: list[BaseCallback] = [
