@@ -60,25 +60,32 @@ def run_episode(env: Any, policy: Any, steps: int, seed: int | None = None,
     rows: dict[str, list] = {k: [] for k in ("time", "observations", "states", "actions",
                                              "inputs", "disturbances", "rewards", "clipped")}
     terminated = False
-    iterator = range(steps)
+    bar = None
     if progress:
         from tqdm import tqdm
 
-        iterator = tqdm(iterator, desc="simulating", unit="step")
-    for k in iterator:
-        # SB3's convention: episode_start resets a stateful policy (e.g. LQR's integrators)
-        action, _ = policy.predict(obs, episode_start=np.array([k == 0]), deterministic=True)
-        rows["time"].append(info["time"])
-        rows["observations"].append(obs)
-        rows["states"].append(info["state"])
-        obs, reward, terminated, truncated, info = env.step(action)
-        rows["actions"].append(action)
-        rows["inputs"].append(info["action_applied"])
-        rows["disturbances"].append(info["disturbance"])
-        rows["rewards"].append(reward)
-        rows["clipped"].append(info["action_clipped"])
-        if terminated or truncated:
-            break
+        # counted by hand: a bar over range(steps) left by the last step's break ends one short
+        bar = tqdm(total=steps, desc="simulating", unit="step")
+    try:
+        for k in range(steps):
+            # SB3's convention: episode_start resets a stateful policy (e.g. LQR's integrators)
+            action, _ = policy.predict(obs, episode_start=np.array([k == 0]), deterministic=True)
+            rows["time"].append(info["time"])
+            rows["observations"].append(obs)
+            rows["states"].append(info["state"])
+            obs, reward, terminated, truncated, info = env.step(action)
+            rows["actions"].append(action)
+            rows["inputs"].append(info["action_applied"])
+            rows["disturbances"].append(info["disturbance"])
+            rows["rewards"].append(reward)
+            rows["clipped"].append(info["action_clipped"])
+            if bar is not None:
+                bar.update()
+            if terminated or truncated:
+                break
+    finally:
+        if bar is not None:
+            bar.close()
     arrays = {k: np.asarray(v, dtype=bool if k == "clipped" else float) for k, v in rows.items()}
     return Episode(**arrays, terminated=bool(terminated))
 

@@ -12,9 +12,14 @@ import dataclasses
 import importlib.util
 import json
 import math
+import os
 import pickle
+import re
+import shutil
+import signal
+import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -92,12 +97,27 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     _check_choice("algo", algo, tuple(ALGOS))
     import yaml  # here: only reading the settings needs PyYAML
 
-    table = yaml.safe_load(path.read_text())
-    params = dict(table.get("default", {}).get(algo, {}))
-    params.update(table.get(env_id, {}).get(algo, {}) or {})
+    try:
+        table = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as error:
+        raise ValueError(f"{path}: invalid YAML: {_one_line(error)}") from None
+    if not isinstance(table, dict) or not all(isinstance(v, dict) for v in table.values()):
+        raise ValueError(f"{path}: must map env ids (and 'default') to algorithms to settings, "
+                         "as agents/hyperparams.yaml does")
+    sections = [table.get(key, {}).get(algo) or {} for key in ("default", env_id)]
+    if not all(isinstance(section, dict) for section in sections):
+        raise ValueError(f"{path}: the settings of {algo!r} must be a mapping of names to values")
+    params = {**sections[0], **sections[1]}
     if not params:
         raise ValueError(f"{path} has no settings for algo {algo!r} (nor a default)")
+    missing = [key for key in ("n_timesteps", "n_envs", "policy") if key not in params]
+    if missing:
+        raise ValueError(f"{path}: the settings of {algo!r} on {env_id} lack {missing}")
     return params
+
+
+def _one_line(error: BaseException) -> str:
+    return " ".join(str(error).split())
 
 
 def _schedule(value: Any) -> Any:
@@ -285,16 +305,21 @@ class KeepBest(BaseCallback):
 
     PPO's last iterate is not its best: on the hydrofoil, a run whose every checkpoint from
     480k steps on flew all validation episodes ended with an agent that broaches at the start.
+
+    :param stopped: whether training was stopped early (Ctrl-C): then the end of training
+        validates nothing more, so that stopping is quick.
     """
 
     def __init__(self, env_id: str, estimator: str, episodes: int, every: int, out: Path,
-                 max_episode_steps: int | None = None) -> None:
+                 max_episode_steps: int | None = None,
+                 stopped: Callable[[], bool] = lambda: False) -> None:
         if not (isinstance(episodes, int) and episodes >= 1):
             raise ValueError(f"validation_episodes={episodes!r} is invalid: an integer >= 1 "
                              "(or 0 in the settings: no validation)")
         super().__init__()
         self.env_id, self.estimator, self.episodes = env_id, estimator, episodes
         self.every, self.out, self.max_episode_steps = every, out, max_episode_steps
+        self.stopped = stopped
         #: one entry per validation: timesteps, failed episodes, mean cost
         self.history: list[dict[str, float]] = []
         self.best: dict[str, float] | None = None
@@ -305,6 +330,8 @@ class KeepBest(BaseCallback):
         return True
 
     def _on_training_end(self) -> None:
+        if self.stopped():
+            return
         if not self.history or self.history[-1]["timesteps"] != self.num_timesteps:
             self._validate()
 
@@ -374,32 +401,152 @@ def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: i
 
 # -- training -------------------------------------------------------------------------------
 
+#: ``config.json``'s ``status``: training (or killed without saving: its checkpoints remain),
+#: stopped by Ctrl-C and saved, or done.
+RUNNING, INTERRUPTED, COMPLETE = "running", "interrupted", "complete"
+CONFIG = "config.json"
+CHECKPOINTS = "checkpoints"
+#: What :func:`train` writes into its folder; ``force`` clears exactly these.
+OWNED = ("model.zip", "last_model.zip", "vecnormalize.pkl", "last_vecnormalize.pkl", CONFIG,
+         CHECKPOINTS, "tb")
+_CHECKPOINT = re.compile(r"model_(\d+)_steps\.zip")
+
+
 @dataclasses.dataclass
 class TrainResult:
-    """What :func:`train` did: output directory, environment steps taken, wall-clock time (s)
-    and throughput (environment steps per second, learning and validation included); with
-    validation, the score of the agent kept in ``model.zip`` (timesteps, failed, cost)."""
+    """What :func:`train` did: output directory, environment steps taken in all (a resumed run
+    counts its earlier steps), wall-clock time of this session (s) and its throughput
+    (environment steps per second, learning and validation included); with validation, the
+    score of the agent kept in ``model.zip`` (timesteps, failed, cost); whether Ctrl-C stopped
+    it (it was saved all the same) and the step count it started from."""
 
     out: Path
     timesteps: int
     wall_seconds: float
     steps_per_second: float
     selected: dict[str, float] | None = None
+    interrupted: bool = False
+    resumed_from: int = 0
 
 
 def _importable(*modules: str) -> bool:
     return all(importlib.util.find_spec(m) is not None for m in modules)
 
 
+class _SigintStops:
+    """While active: the first SIGINT (Ctrl-C) asks training to stop at the next step, where
+    everything can be saved whole (a ``KeyboardInterrupt`` may land in the middle of writing
+    a checkpoint); a second one interrupts at once. Only in the main thread (where Python
+    delivers signals); elsewhere SIGINT keeps its handler."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: Any = None
+
+    def __enter__(self) -> _SigintStops:
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+
+class _StopWhen(BaseCallback):
+    """Ends training at the next step once ``stop()`` is true."""
+
+    def __init__(self, stop: Callable[[], bool]) -> None:
+        super().__init__()
+        self.stop = stop
+
+    def _on_step(self) -> bool:
+        return not self.stop()
+
+
+class _Progress(BaseCallback):
+    """A tqdm bar over the environment steps, from ``start`` to ``total``; it ends full
+    (at the steps taken, which an on-policy rollout may take past ``total``) and is closed
+    whatever ends training."""
+
+    def __init__(self, start: int, total: int) -> None:
+        super().__init__()
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, initial=start, unit="step", desc="training",
+                        dynamic_ncols=True)
+
+    def _on_step(self) -> bool:
+        self.bar.update(min(self.num_timesteps, self.bar.total) - self.bar.n)
+        return True
+
+    def close(self, steps: int) -> None:
+        self.bar.total = max(self.bar.total, steps)
+        self.bar.update(steps - self.bar.n)
+        self.bar.close()
+
+
+def _write_config(out: Path, config: Mapping[str, Any]) -> None:
+    """``config.json``, replaced whole (a reader never sees half of it)."""
+    tmp = out / f".{CONFIG}.tmp"
+    tmp.write_text(json.dumps(config, indent=2) + "\n")
+    os.replace(tmp, out / CONFIG)
+
+
+def read_config(run: Path) -> dict[str, Any]:
+    """The ``config.json`` of the run folder ``run``.
+
+    :raises FileNotFoundError: no such folder or no config.json in it.
+    :raises ValueError: it is not a JSON object of a run's settings.
+    """
+    path = Path(run) / CONFIG
+    if not path.is_file():
+        raise FileNotFoundError(f"{run} is not a 'marine train' folder: no {CONFIG} in it")
+    try:
+        config = json.loads(path.read_text())
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path}: invalid JSON: {error}") from None
+    missing = [k for k in ("env_id", "algo", "hyperparams") if k not in (config or {})]
+    if not isinstance(config, dict) or missing:
+        raise ValueError(f"{path} is not a 'marine train' config: missing {missing}")
+    return config
+
+
+def existing_run(out: Path) -> list[str]:
+    """What of a run (:data:`OWNED`) is in ``out`` already."""
+    return [name for name in OWNED if (Path(out) / name).exists()]
+
+
+def clear_run(out: Path) -> None:
+    """Remove what :func:`train` wrote into ``out`` (:data:`OWNED`), and nothing else."""
+    for name in OWNED:
+        path = Path(out) / name
+        if path.is_dir():
+            shutil.rmtree(path)
+        elif path.exists():
+            path.unlink()
+
+
 def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
           timesteps: int | None = None, out: Path = Path("runs/sb3"), seed: int = 0,
           n_envs: int | None = None, backend: str = "native", progress_bar: bool = True,
           hyperparams: Mapping[str, Any] | None = None,
-          max_episode_steps: int | None = None, torch_threads: int | None = 1) -> TrainResult:
+          max_episode_steps: int | None = None, torch_threads: int | None = 1,
+          hyperparams_file: Path = HYPERPARAMS, force: bool = True) -> TrainResult:
     """Train ``algo`` on ``env_id`` and save ``model.zip``, ``vecnormalize.pkl`` (when the
     settings normalise), ``config.json`` and ``checkpoints/`` into ``out``. With the setting
     ``validation_episodes`` (:class:`KeepBest`), ``model.zip`` is the best validated agent,
     ``last_model.zip`` the last, and ``config.json`` has each validation's scores.
+
+    ``config.json`` is written first (``"status": "running"``) and rewritten at the end
+    (``"complete"``, with the step count). Ctrl-C (SIGINT) stops training at the next step and
+    saves the agent as at the end (``"interrupted"``; :attr:`TrainResult.interrupted`);
+    :func:`resume` continues it.
 
     :param timesteps: environment steps (default: the YAML's ``n_timesteps``).
     :param n_envs: parallel environments (default: the YAML's).
@@ -407,71 +554,320 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
     :param torch_threads: torch's intra-op threads while training (None: leave as is). One by
         default: small MLPs gain nothing from more, and torch's threads spinning against
         numpy's made training 20x slower on 2 cores.
+    :param hyperparams_file: the RL-Zoo style YAML of settings (default: the package's).
+    :param force: replace a run already in ``out``, clearing what it wrote
+        (:func:`clear_run`), so that two runs never mix; False: refuse such a folder (what
+        ``marine train`` does without ``--force``).
+    :raises FileExistsError: ``out`` holds a run and ``force`` is False.
     """
-    _check_choice("algo", algo, tuple(ALGOS))
+    config = settings(env_id, algo, estimator, timesteps, seed, n_envs, backend, hyperparams,
+                      max_episode_steps, hyperparams_file)
+    out = Path(out)
+    if not force and existing_run(out):
+        raise FileExistsError(f"{out} already holds a training run ({', '.join(existing_run(out))})"
+                              ": continue it with --resume, or replace it with --force")
+    return _run(config, out, None, progress_bar, torch_threads)
+
+
+def settings(env_id: str, algo: str = "ppo", estimator: str | None = None,
+             timesteps: int | None = None, seed: int = 0, n_envs: int | None = None,
+             backend: str = "native", hyperparams: Mapping[str, Any] | None = None,
+             max_episode_steps: int | None = None, hyperparams_file: Path = HYPERPARAMS
+             ) -> dict[str, Any]:
+    """The validated settings of a :func:`train` run, as its ``config.json`` starts.
+
+    :raises ValueError: an unknown env id, algorithm, estimator or backend, or a step or
+        environment count that is not a positive integer (naming it), before any work.
+    """
+    algorithm(algo)  # an extra's algorithm is imported here: a missing extra named up front
     _check_choice("estimator", estimator, estimator_choices())
     _check_choice("backend", backend, BACKENDS)
-    params = {**load_hyperparams(env_id, algo), **dict(hyperparams or {})}
+    params = {**load_hyperparams(env_id, algo, Path(hyperparams_file)),
+              **dict(hyperparams or {})}
     yaml_timesteps, yaml_envs = params.pop("n_timesteps"), params.pop("n_envs")
     timesteps = int(yaml_timesteps if timesteps is None else timesteps)
     if timesteps <= 0:
         raise ValueError(f"timesteps={timesteps!r} is invalid: a positive number of steps")
-    n_envs = int(yaml_envs if n_envs is None else n_envs)
-    config = {"env_id": env_id, "algo": algo, "estimator": estimator, "seed": seed,
-              "n_envs": n_envs, "backend": backend, "max_episode_steps": max_episode_steps,
-              "hyperparams": copy.deepcopy(params)}
+    n_envs = yaml_envs if n_envs is None else n_envs
+    if not (isinstance(n_envs, int) and n_envs >= 1):
+        raise ValueError(f"n_envs={n_envs!r} is invalid: an integer >= 1")
+    for key in ("learning_rate", "clip_range"):
+        _schedule(params.get(key))  # a malformed "lin_" fails here, not after the setup
+    episodes = params.get("validation_episodes", 0)
+    if episodes and not (isinstance(episodes, int) and episodes >= 1):
+        raise ValueError(f"validation_episodes={episodes!r} is invalid: an integer >= 1 "
+                         "(or 0 in the settings: no validation)")
+    penalty = params.get("failure_penalty", 0.0)
+    if not (isinstance(penalty, int | float) and math.isfinite(penalty) and penalty >= 0):
+        raise ValueError(f"failure_penalty={penalty!r} is invalid: a finite number >= 0")
+    return {"env_id": env_id, "algo": algo, "estimator": estimator or RAW, "seed": seed,
+            "n_envs": n_envs, "backend": backend, "max_episode_steps": max_episode_steps,
+            "hyperparams_file": str(hyperparams_file), "hyperparams": copy.deepcopy(params),
+            "status": RUNNING, "timesteps": 0, "target_timesteps": timesteps,
+            # about five checkpoints (and validations) a run, in vector steps of n_envs boats
+            "checkpoint_every": max(1, math.ceil(timesteps / 5 / n_envs)),
+            "wall_seconds": 0.0}
+
+
+@dataclasses.dataclass(frozen=True)
+class Saved:
+    """A saved agent: its ``model`` zip, the ``vecnormalize`` statistics saved with it (None
+    if there are none), the run folder whose ``config.json`` describes it and its step
+    count (None if unknown)."""
+
+    model: Path
+    vecnormalize: Path | None
+    run: Path
+    timesteps: int | None
+
+
+def _statistics_of(model: Path) -> Path:
+    """Where :func:`train` saves the normalisation statistics that go with ``model``."""
+    found = _CHECKPOINT.fullmatch(model.name)
+    if found:
+        return model.with_name(f"model_vecnormalize_{found[1]}_steps.pkl")
+    return model.with_name(model.name.replace("model.zip", "vecnormalize.pkl"))
+
+
+def _saved(model: Path, run: Path, config: Mapping[str, Any], steps: int | None) -> Saved:
+    """``model`` with its statistics, checked against the run's settings."""
+    statistics = _statistics_of(model)
+    if config["hyperparams"].get("normalize") and not statistics.exists():
+        raise ValueError(f"{model} was trained on normalised observations but {statistics.name} "
+                         "is missing beside it")
+    return Saved(model, statistics if statistics.exists() else None, run, steps)
+
+
+def checkpoints(run: Path) -> list[tuple[int, Path]]:
+    """The run's checkpoints as ``(steps, path)``, oldest first."""
+    folder = Path(run) / CHECKPOINTS
+    found = [(int(m[1]), p) for p in folder.glob("model_*_steps.zip")
+             if (m := _CHECKPOINT.fullmatch(p.name))] if folder.is_dir() else []
+    return sorted(found)
+
+
+def find_agent(path: Path) -> Saved:
+    """The agent that ``path`` names: a run folder (its ``model.zip``, else its latest
+    checkpoint: a run stopped before saving), or a model file (``model.zip``,
+    ``last_model.zip`` or ``checkpoints/model_<N>_steps.zip``) of a run folder.
+
+    :raises FileNotFoundError: no such file or folder.
+    :raises ValueError: a file that is not a saved model of a run, or a run without any.
+    """
+    path = Path(path)
+    if path.is_dir():
+        config = read_config(path)
+        if (path / "model.zip").exists():
+            return _saved(path / "model.zip", path, config, _final_steps(config, "model.zip"))
+        saved = checkpoints(path)
+        if not saved:
+            raise ValueError(f"{path} holds no model.zip and no checkpoint yet")
+        return _saved(saved[-1][1], path, config, saved[-1][0])
+    if not path.exists():
+        raise FileNotFoundError(f"no such run folder or model file: {path}")
+    run = path.parent.parent if path.parent.name == CHECKPOINTS else path.parent
+    if path.suffix != ".zip" or not (run / CONFIG).is_file():
+        raise ValueError(f"{path} is not a model saved by 'marine train': give its run folder, "
+                         "its model.zip or a checkpoints/model_<N>_steps.zip")
+    config = read_config(run)
+    found = _CHECKPOINT.fullmatch(path.name)
+    return _saved(path, run, config, int(found[1]) if found else _final_steps(config, path.name))
+
+
+def _final_steps(config: Mapping[str, Any], name: str) -> int | None:
+    """Steps of the run's final ``model.zip`` or ``last_model.zip`` (None: not known)."""
+    if config.get("status", COMPLETE) == RUNNING:
+        return None
+    if name == "model.zip" and config.get("validation"):
+        selected = config["validation"].get("selected")
+        return None if selected is None else int(selected["timesteps"])
+    return int(config["timesteps"])
+
+
+def latest(run: Path) -> Saved:
+    """Where :func:`resume` continues ``run``: the last agent it saved, by step count (the
+    final or interrupted one, or a later checkpoint of a run that was killed).
+
+    :raises FileNotFoundError: ``run`` is not a run folder.  :raises ValueError: nothing saved.
+    """
+    config = read_config(run)
+    candidates = [(steps, 1, path) for steps, path in checkpoints(run)]
+    last = Path(run) / ("last_model.zip" if config.get("validation") else "model.zip")
+    if config.get("status", COMPLETE) in (INTERRUPTED, COMPLETE) and last.exists():  # older: none
+        candidates.append((int(config["timesteps"]), 2, last))  # the same steps: it wins
+    if not candidates:
+        raise ValueError(f"{run} holds no saved agent to resume from (no model, no checkpoint)")
+    steps, _, path = max(candidates)
+    return _saved(path, Path(run), config, steps)
+
+
+def resume(run: Path, timesteps: int | None = None, progress_bar: bool = True,
+           torch_threads: int | None = 1) -> TrainResult:
+    """Continue the training run in ``run`` from its last saved agent (:func:`latest`), with
+    the settings of its ``config.json``, the normalisation statistics saved with the agent
+    and its step count (SB3's ``reset_num_timesteps=False``: schedules and checkpoint names
+    go on), to ``timesteps`` steps in all (default: the run's own target). An off-policy
+    algorithm's replay buffer is not saved: it refills from the resumed policy.
+
+    :raises ValueError: nothing to resume from, or ``timesteps`` not beyond its steps.
+    """
+    run = Path(run)
+    saved = latest(run)
+    config = read_config(run)
+    target = int(config.get("target_timesteps", config.get("timesteps", 0))
+                 if timesteps is None else timesteps)
+    assert saved.timesteps is not None
+    if target <= saved.timesteps:
+        raise ValueError(f"{run} has trained {saved.timesteps} of {target} steps: nothing to "
+                         "resume; give --timesteps beyond it to train further")
+    config.update(status=RUNNING, target_timesteps=target,
+                  estimator=config.get("estimator") or RAW)
+    config.setdefault("checkpoint_every", max(1, math.ceil(target / 5 / config["n_envs"])))
+    return _run(config, run, saved, progress_bar, torch_threads)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Penalty:
+    """A run's failure penalty (reward units) and whether a failure also costs the rest of
+    its episode at its own rate (:class:`FailurePenalty`)."""
+
+    penalty: float = 0.0
+    cost_to_go: bool = False
+
+
+def _algorithm_kwargs(config: Mapping[str, Any]) -> tuple[dict[str, Any], str, bool,
+                                                         dict[str, Any], _Penalty, int]:
+    """From the run's settings: the algorithm's keyword arguments (schedules built), the
+    policy, whether and how to normalise, the failure penalty and the validation episodes."""
+    params = copy.deepcopy(dict(config["hyperparams"]))
     policy, normalize = params.pop("policy"), params.pop("normalize", False)
     # normalize: a bool, or VecNormalize's keyword arguments (RL-Zoo style)
     normalize_kwargs = dict(normalize) if isinstance(normalize, Mapping) else {}
-    normalize = bool(normalize)
-    penalty = float(params.pop("failure_penalty", 0.0))
-    cost_to_go = bool(params.pop("failure_cost_to_go", False))
+    penalty = _Penalty(float(params.pop("failure_penalty", 0.0)),
+                       bool(params.pop("failure_cost_to_go", False)))
+    validation_episodes = params.pop("validation_episodes", 0)
     for key in ("learning_rate", "clip_range"):
         if key in params:
             params[key] = _schedule(params[key])
-    # about five checkpoints (and validations) a run; every counts vector steps of n_envs boats
-    every = max(1, math.ceil(timesteps / 5 / n_envs))
-    validation_episodes = params.pop("validation_episodes", 0)
-    out = Path(out)
-    keeper = KeepBest(env_id, estimator or RAW, validation_episodes, every, out,
-                      max_episode_steps) if validation_episodes else None
-    out.mkdir(parents=True, exist_ok=True)
-    venv = make_vec_env(env_id, n_envs, estimator, seed, backend, max_episode_steps)
-    if penalty or cost_to_go:
-        steps = evaluation.episode_steps(env_id, max_episode_steps) if cost_to_go else None
-        venv = FailurePenalty(venv, penalty, steps)
-    if normalize:  # rewards too only on-policy: a replay buffer would keep stale scales
-        normalize_kwargs = {"gamma": params.get("gamma", 0.99), "norm_reward": algo in ON_POLICY,
-                            **normalize_kwargs}
-        venv = VecNormalize(venv, **normalize_kwargs)
+    return params, policy, bool(normalize), normalize_kwargs, penalty, validation_episodes
+
+
+def _environments(config: Mapping[str, Any], saved: Saved | None, params: Mapping[str, Any],
+                  normalize: bool, normalize_kwargs: dict[str, Any], penalty: _Penalty
+                  ) -> VecEnv:
+    """The training environments: seeded on, after the steps already taken (a resumed run
+    sees new episodes), behind the failure penalty and the normalisation (restored)."""
+    start = 0 if saved is None else int(saved.timesteps or 0)
+    venv = make_vec_env(config["env_id"], config["n_envs"], config["estimator"],
+                        config["seed"] + start, config["backend"], config["max_episode_steps"])
+    if penalty.penalty or penalty.cost_to_go:
+        steps = evaluation.episode_steps(config["env_id"], config["max_episode_steps"]) \
+            if penalty.cost_to_go else None
+        venv = FailurePenalty(venv, penalty.penalty, steps)
+    if not normalize:
+        return venv
+    if saved is not None and saved.vecnormalize is not None:
+        venv = VecNormalize.load(str(saved.vecnormalize), venv)
+        venv.training = True
+        return venv
+    # rewards too only on-policy: a replay buffer would keep stale scales
+    normalize_kwargs = {"gamma": params.get("gamma", 0.99),
+                        "norm_reward": config["algo"] in ON_POLICY, **normalize_kwargs}
+    return VecNormalize(venv, **normalize_kwargs)
+
+
+def _run(config: dict[str, Any], out: Path, saved: Saved | None, progress_bar: bool,
+         torch_threads: int | None) -> TrainResult:
+    """Train (or go on training ``saved``) to ``config["target_timesteps"]``, save and
+    rewrite ``config.json``; Ctrl-C stops at the next step and saves the same way. The folder
+    is created (a new run's old files cleared) and ``config.json`` written once the
+    environments and the model are built: a setting they refuse leaves no trace."""
+    algo, target = config["algo"], int(config["target_timesteps"])
+    params, policy, normalize, normalize_kwargs, penalty, episodes = _algorithm_kwargs(config)
+    venv = _environments(config, saved, params, normalize, normalize_kwargs, penalty)
     tensorboard = str(out / "tb") if _importable("tensorboard") else None
-    model = algorithm(algo)(policy, venv, seed=seed, device="cpu", verbose=0,
-                        tensorboard_log=tensorboard, **params)
-    callbacks: list[BaseCallback] = [CheckpointCallback(
-        every, str(out / "checkpoints"), name_prefix="model", save_vecnormalize=normalize)]
-    if keeper is not None:
-        callbacks.append(keeper)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(torch_threads or threads)
-    start = time.perf_counter()
-    try:
-        model.learn(timesteps, callback=callbacks,
-                    progress_bar=progress_bar and _importable("tqdm", "rich"))
-    finally:
-        torch.set_num_threads(threads)
-    wall = time.perf_counter() - start
-    result = TrainResult(out, int(model.num_timesteps), wall, model.num_timesteps / wall,
-                         None if keeper is None else keeper.best)
+    start = 0 if saved is None else int(saved.timesteps or 0)
+    if saved is None:
+        try:
+            model = algorithm(algo)(policy, venv, seed=config["seed"], device="cpu", verbose=0,
+                                    tensorboard_log=tensorboard, **params)
+        except TypeError as error:  # a setting the algorithm does not take (a typo?)
+            venv.close()
+            raise ValueError(f"{config.get('hyperparams_file', 'the settings')}: {algo}: "
+                             f"{error}") from None
+        clear_run(out)
+    else:
+        schedules = {k: params[k] for k in ("learning_rate", "clip_range") if k in params}
+        model = algorithm(algo).load(saved.model, env=venv, device="cpu",
+                                     custom_objects=schedules, tensorboard_log=tensorboard)
+        model.num_timesteps = start
+        model.set_random_seed(config["seed"] + start)
+    out.mkdir(parents=True, exist_ok=True)
+    _write_config(out, config)
+    with _SigintStops() as sigint:
+        keeper = _keeper(config, out, episodes, sigint)
+        callbacks: list[BaseCallback] = [
+            CheckpointCallback(config["checkpoint_every"], str(out / CHECKPOINTS),
+                               name_prefix="model", save_vecnormalize=normalize),
+            _StopWhen(lambda: sigint.requested)]
+        if keeper is not None:
+            callbacks.append(keeper)
+        progress = _Progress(start, target) if progress_bar and _importable("tqdm") else None
+        if progress is not None:
+            callbacks.append(progress)
+        threads = torch.get_num_threads()
+        torch.set_num_threads(torch_threads or threads)
+        began = time.perf_counter()
+        try:
+            model.learn(target - start, callback=callbacks, reset_num_timesteps=saved is None)
+        finally:
+            torch.set_num_threads(threads)
+            if progress is not None:
+                progress.close(int(model.num_timesteps))
+        wall = time.perf_counter() - began
+        stopped = sigint.requested
+    return _finish(model, venv, keeper, config, out, wall, start, stopped)
+
+
+def _keeper(config: Mapping[str, Any], out: Path, episodes: int, sigint: _SigintStops
+            ) -> KeepBest | None:
+    """:class:`KeepBest` for the run (carrying on a resumed run's validations), or None."""
+    if not episodes:
+        return None
+    keeper = KeepBest(config["env_id"], config["estimator"], episodes,
+                      config["checkpoint_every"], out, config["max_episode_steps"],
+                      stopped=lambda: sigint.requested)
+    validation = config.get("validation") or {}
+    keeper.history = list(validation.get("history", []))
+    keeper.best = validation.get("selected")
+    return keeper
+
+
+def _finish(model: BaseAlgorithm, venv: VecEnv, keeper: KeepBest | None,
+            config: dict[str, Any], out: Path, wall: float, start: int, stopped: bool
+            ) -> TrainResult:
+    """Save the agent (model.zip, or last_model.zip beside KeepBest's choice) and its
+    statistics, and write the final ``config.json``."""
+    steps = int(model.num_timesteps)
     last = "" if keeper is None else "last_"  # model.zip is then KeepBest's choice
     model.save(out / f"{last}model.zip")
-    if normalize:
-        venv.save(str(out / f"{last}vecnormalize.pkl"))
-    config.update(timesteps=result.timesteps, wall_seconds=wall,
+    normalizer = model.get_vec_normalize_env()
+    if normalizer is not None:
+        normalizer.save(str(out / f"{last}vecnormalize.pkl"))
+    if keeper is not None and not (out / "model.zip").exists():
+        # stopped before the first validation: the last agent is all there is
+        shutil.copyfile(out / "last_model.zip", out / "model.zip")
+        if normalizer is not None:
+            shutil.copyfile(out / "last_vecnormalize.pkl", out / "vecnormalize.pkl")
+    result = TrainResult(out, steps, wall, (steps - start) / max(wall, 1e-9),
+                         None if keeper is None else keeper.best, stopped, start)
+    config.update(status=INTERRUPTED if stopped else COMPLETE, timesteps=steps,
+                  wall_seconds=float(config.get("wall_seconds", 0.0)) + wall,
                   steps_per_second=result.steps_per_second)
     if keeper is not None:
-        config["validation"] = {"first_seed": VALIDATION_SEED, "episodes": validation_episodes,
+        config["validation"] = {"first_seed": VALIDATION_SEED, "episodes": keeper.episodes,
                                 "selected": keeper.best, "history": keeper.history}
-    (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    _write_config(out, config)
     venv.close()
     return result
 
@@ -511,24 +907,29 @@ class Agent:
         return hasattr(self.model.policy, "lstm_hidden_state_shape")
 
 
-def load_agent(out: Path) -> Agent:
-    """The agent :func:`train` saved into ``out``."""
-    out = Path(out)
-    config = json.loads((out / "config.json").read_text())
-    model = algorithm(config["algo"]).load(out / "model.zip", device="cpu")
+def load_agent(path: Path) -> Agent:
+    """The agent :func:`train` saved: ``path`` is its run folder, a checkpoint or a model file
+    of it (:func:`find_agent`)."""
+    saved = find_agent(Path(path))
+    config = read_config(saved.run)
+    model = algorithm(config["algo"]).load(saved.model, device="cpu")
     normalizer = None
-    if (out / "vecnormalize.pkl").exists():
+    if saved.vecnormalize is not None:
         # unpickled without its env: only its statistics are used, never updated
-        with open(out / "vecnormalize.pkl", "rb") as f:
+        with open(saved.vecnormalize, "rb") as f:
             normalizer = pickle.load(f)
         normalizer.training = False
-    return Agent(model, normalizer, config)
+    return Agent(model, normalizer, {**config, "model": str(saved.model),
+                                     "model_timesteps": saved.timesteps})
 
 
-def evaluate(out: Path, episodes: int = 5, seed: int = 0) -> list[dict[str, float]]:
-    """Score the agent saved in ``out`` on ``episodes`` episodes of seeds ``seed, seed + 1,
-    ...``, behind its training estimator (:func:`agents.evaluation.evaluate`).
+def evaluate(out: Path, episodes: int = 5, seed: int = 0,
+             progress: Callable[[int], None] | None = None) -> list[dict[str, float]]:
+    """Score the agent saved in ``out`` (a run folder, a checkpoint or a model file of it) on
+    ``episodes`` episodes of seeds ``seed, seed + 1, ...``, behind its training estimator
+    (:func:`agents.evaluation.evaluate`).
 
+    :param progress: called with the number of steps done since its last call.
     :return: one row of :func:`~agents.evaluation.episode_metrics` per episode (cost,
         failures, RMS errors, actuator usage, estimation errors), with its ``seed``.
     """
@@ -538,4 +939,5 @@ def evaluate(out: Path, episodes: int = 5, seed: int = 0) -> list[dict[str, floa
     config = agent.config
     return evaluation.evaluate(config["env_id"], lambda venv: agent,
                                config["estimator"] or RAW, range(seed, seed + episodes),
-                               max_episode_steps=config.get("max_episode_steps"))
+                               max_episode_steps=config.get("max_episode_steps"),
+                               progress=progress)

@@ -20,8 +20,10 @@ Columns
         logged. A diagnosis takes them as known inputs
         (:class:`~marine_envs.models.MeasuredDisturbances`) instead of estimating them.
 
-    No other columns are allowed, every value must be a finite number and there must be at least
-    two rows.
+    No other columns are allowed and there must be at least two rows. Every value must be a
+    finite number, except in the measured channels: there an empty cell or NaN marks a sample
+    the logger dropped, a missing measurement (:attr:`Recording.missing`; the filters skip it,
+    as they skip a dropped sensor sample). Time, inputs and disturbances must be complete.
 
 Metadata, a JSON object
     ``model`` (required)
@@ -55,11 +57,16 @@ and ``run.csv.json``::
      "phi": "deg"}, "seed": 3, "policy": "lqr"}
 
 Reading checks all of the above and raises ``ValueError`` naming the offending column or row.
+Values that are legal but implausible for the model (an input beyond twice its bound, an angle
+beyond 2 pi: most often a unit mistake) are kept, and listed in :attr:`Recording.warnings` with
+the likely mistake; :func:`read_recording` also issues them as
+:class:`~marine_envs.plausibility.PlausibilityWarning`.
 Parquet support needs pyarrow: ``pip install "marine-envs[parquet]"``.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 from collections.abc import Callable, Mapping
@@ -71,6 +78,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import ArrayLike
 
+from . import plausibility
 from .models import VehicleModel, get_model
 
 #: Key of the metadata in the Parquet schema metadata.
@@ -112,6 +120,8 @@ class Recording:
     :param params: parameter overrides by docs/models.md symbol (SI units).
     :param meta: free-form extra metadata (env id, seed, dt, policy, ...); JSON-serialisable.
     :param require_uniform: reject a non-uniform time step (not stored).
+    :param declared_units: the units the file declared per column, before conversion to SI
+        (not stored): they name the likely unit mistake in :attr:`warnings`.
     :raises ValueError: the recording breaks the format; the message names the column or row.
     """
 
@@ -120,13 +130,20 @@ class Recording:
     params: dict[str, float] = field(default_factory=dict)
     meta: dict[str, Any] = field(default_factory=dict)
     require_uniform: InitVar[bool] = True
+    declared_units: InitVar[Mapping[str, str] | None] = None
+    #: After :meth:`filled`: which samples of :attr:`measurements` were missing, ``(n, m)``
+    #: (None: none were), so that a filter can still skip them.
+    gaps = None
 
-    def __post_init__(self, require_uniform: bool) -> None:
+    def __post_init__(self, require_uniform: bool,
+                      declared_units: Mapping[str, str] | None) -> None:
         self.validate(require_uniform)
         self.params = dict(self.params)
         self.meta = dict(self.meta)
         # A float64 copy in canonical column order, so callers' frames are never aliased.
         self.data = self.data[list(self.units)].astype(float).reset_index(drop=True)
+        #: Why some columns look implausible for the model (unit mistakes?), one line each.
+        self.warnings: list[str] = self._plausibility(declared_units or {})
 
     @classmethod
     def from_arrays(
@@ -195,8 +212,89 @@ class Recording:
         if len(self.data) < 2:
             raise ValueError(f"recording has {len(self.data)} row(s); at least 2 rows are needed")
         values = {name: _numeric(self.data[name], name) for name in _canonical(self.data, vehicle)}
-        _check_finite(values)
+        _check_finite(values, vehicle.output_names)
         _check_time(values[TIME], require_uniform)
+
+    def _plausibility(self, declared: Mapping[str, str]) -> list[str]:
+        """One line per column whose values look like a unit mistake
+        (:mod:`marine_envs.plausibility`): inputs beyond twice the model's bounds, angles
+        beyond 2 pi, a heading that turns faster than its rate says."""
+        vehicle = _vehicle(self.model, self.params)
+        low, high = vehicle.u_bounds
+        bounds = dict(zip(vehicle.input_names, np.maximum(np.abs(low), np.abs(high)).tolist(),
+                          strict=True))
+        lines = [plausibility.recorded_values(name, self.data[name].to_numpy(), unit,
+                                              declared.get(name), bounds.get(name))
+                 for name, unit in self.units.items() if name != TIME]
+        lines += [plausibility.heading_rate(psi, self.data[psi].to_numpy(), r,
+                                            self.data[r].to_numpy(), self.time)
+                  for psi, r in plausibility.HEADING_RATES.items()
+                  if psi in self.data.columns and r in self.data.columns]
+        return [line for line in lines if line]
+
+    # -- missing samples and cuts ----------------------------------------------------------------
+    @property
+    def missing(self) -> np.ndarray:
+        """Which measurements are missing (NaN: a sample the logger dropped), shape
+        ``(n, len(measured_names))``."""
+        return np.isnan(self.measurements)
+
+    def filled(self) -> Recording:
+        """This recording with every missing measurement replaced by linear interpolation in
+        time between its channel's neighbouring samples (the nearest one at the ends; angles
+        through their unwrapped values), and :attr:`gaps` marking them, for code that needs
+        complete columns but should still skip these samples."""
+        missing = self.missing
+        data, time = self.data.copy(), self.time
+        for j, name in enumerate(self.measured_names):
+            gap = missing[:, j]
+            if not gap.any():
+                continue
+            known = data[name].to_numpy()[~gap]
+            angle = self.units[name] == "rad"
+            values = np.interp(time[gap], time[~gap], np.unwrap(known) if angle else known)
+            if angle and np.all(np.abs(known) <= math.pi):  # a wrapped channel stays wrapped
+                values = np.angle(np.exp(1j * values))
+            data.loc[gap, name] = values
+        out = Recording(data, self.model, self.params, self.meta, require_uniform=False)
+        out.gaps = missing if missing.any() else None
+        out.warnings = list(self.warnings)  # read with the file's declared units
+        return out
+
+    def window(self, start: float | None = None, stop: float | None = None,
+               decimate: int = 1) -> Recording:
+        """The samples with ``start <= time <= stop`` (s, on the record's own clock; None:
+        from the first, to the last), every ``decimate``-th of them. Decimation keeps samples
+        and filters nothing: the sensor noise stays white, content above the new Nyquist
+        frequency folds down (keep ``decimate`` below the sample rate over the vehicle's
+        bandwidth).
+
+        :raises ValueError: ``decimate`` not an integer >= 1, ``start >= stop``, or fewer than 2
+            samples left (naming the numbers).
+        """
+        if isinstance(decimate, bool) or not isinstance(decimate, int | np.integer) \
+                or decimate < 1:
+            raise ValueError(f"decimate={decimate!r} is invalid: an integer >= 1")
+        time = self.time
+        low = time[0] if start is None else float(start)
+        high = time[-1] if stop is None else float(stop)
+        if not (math.isfinite(low) and math.isfinite(high) and low < high):
+            raise ValueError(f"start={start!r}, stop={stop!r} are invalid: start < stop, in s "
+                             f"(the record runs from {time[0]:.6g} s to {time[-1]:.6g} s)")
+        rows = np.flatnonzero((time >= low) & (time <= high))[::decimate]
+        if rows.size < 2:
+            raise ValueError(f"start={start!r}, stop={stop!r}, decimate={decimate} leave "
+                             f"{rows.size} sample(s) of a record from {time[0]:.6g} s to "
+                             f"{time[-1]:.6g} s; at least 2 are needed")
+        meta = dict(self.meta)
+        if rows.size < len(time):
+            meta["window"] = {"start": float(time[rows[0]]), "stop": float(time[rows[-1]]),
+                              "decimate": int(decimate)}
+        out = Recording(self.data.iloc[rows], self.model, self.params, meta,
+                        require_uniform=False)
+        out.gaps = None if self.gaps is None else self.gaps[rows]
+        out.warnings = list(self.warnings)  # read with the file's declared units
+        return out
 
     # -- views ---------------------------------------------------------------------------------
     @property
@@ -319,9 +417,11 @@ def read_recording(
         raise FileNotFoundError(f"recording not found: {path}")
     try:
         data, metadata, where = reader(path)
-        return _from_table(data, metadata, where, model, require_uniform)
+        recording = _from_table(data, metadata, where, model, require_uniform)
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from exc
+    plausibility.warn((f"{path.name}: {line}" for line in recording.warnings), stacklevel=2)
+    return recording
 
 
 def _from_table(data: pd.DataFrame, metadata: dict[str, Any] | None, where: str,
@@ -338,8 +438,10 @@ def _from_table(data: pd.DataFrame, metadata: dict[str, Any] | None, where: str,
         raise ValueError(f"recording is for model {named!r}, not {model!r}")
     name = named if named is not None else model
     params = meta.pop("params", None) or {}
-    data = _to_si(data, meta.pop("units", None) or {}, get_model(name))
-    return Recording(data, name, params, meta, require_uniform=require_uniform)
+    units = meta.pop("units", None) or {}
+    data = _to_si(data, units, get_model(name))
+    return Recording(data, name, params, meta, require_uniform=require_uniform,
+                     declared_units=units)
 
 
 def _read_csv(path: Path) -> tuple[pd.DataFrame, dict[str, Any] | None, str]:
@@ -407,13 +509,22 @@ def _si_factor(column: str, unit: Any, expected: str) -> float:
 
 
 def check_suffix(path: str | Path) -> Path:
-    """``path`` as a Path if its suffix names a recording format (.csv, .parquet).
+    """``path`` as a Path if its suffix names a recording format (.csv, .parquet) that can be
+    written here (Parquet needs pyarrow).
 
     :raises ValueError: any other suffix (before any work is done, e.g. a long simulation).
+    :raises ImportError: a Parquet file without pyarrow installed.
     """
     path = Path(path)
     _format(path)
+    if path.suffix.lower() == ".parquet" and importlib.util.find_spec("pyarrow") is None:
+        raise ImportError(_PARQUET_HINT)
     return path
+
+
+def sidecar(path: str | Path) -> Path:
+    """The JSON sidecar :func:`write_recording` writes beside a CSV ``path``."""
+    return _sidecars(Path(path))[0]
 
 
 def _format(path: Path) -> tuple[Callable[..., None], Callable[[Path], Any]]:
@@ -501,10 +612,15 @@ def _numeric(column: pd.Series, name: str) -> np.ndarray:
     return column.to_numpy(dtype=float, na_value=np.nan)
 
 
-def _check_finite(values: dict[str, np.ndarray]) -> None:
+def _check_finite(values: dict[str, np.ndarray], measured: tuple[str, ...]) -> None:
+    """Every value finite, but for missing samples (NaN) in the ``measured`` channels."""
     time = values[TIME]
     for name, column in values.items():  # time first, so a later row's time is trustworthy
-        bad = np.flatnonzero(~np.isfinite(column))
+        dropped = name in measured  # NaN there is a sample the logger dropped
+        if dropped and np.isnan(column).all():
+            raise ValueError(f"column {name!r} has no value: every row is missing (NaN or "
+                             "empty); leave an unmeasured channel out")
+        bad = np.flatnonzero(np.isinf(column) if dropped else ~np.isfinite(column))
         if bad.size:
             row = bad[0]
             when = "" if name == TIME else f" (time {time[row]:.10g} s)"

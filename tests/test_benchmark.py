@@ -142,3 +142,21 @@ def test_ray_gives_the_local_numbers(tmp_path):
     pd.testing.assert_frame_equal(local.sort_values(key).reset_index(drop=True),
                                   remote.sort_values(key).reset_index(drop=True))
     assert (local["status"] == "ok").all() and gym.spec("marine_envs/ROV-v0") is not None
+
+
+def test_the_summary_says_n_a_and_all_failed_rather_than_none_or_a_truncated_cost():
+    from agents.benchmark import markdown_summary
+
+    cell = {"vehicle": "usv", "controller": "lqr", "sea": "moderate", "sensor": "default"}
+    rows = pd.DataFrame([{**cell, "estimator": estimator, "status": "ok", "seed": seed,
+                          "cost": cost + seed, "failed": failed}
+                         for estimator, cost, failed in (("true", 10.0, 0.0), ("kf", 5.0, 1.0),
+                                                         ("raw", 20.0, 1.0))
+                         for seed in (0, 1)])
+    text = markdown_summary(rows)
+    assert "None" not in text and "nan" not in text
+    assert "all 2 failed" in text and "20.5" not in text and "5.5" not in text
+    order = ordering(rows).iloc[0]
+    assert bool(order["true<=kf"]) is True  # fewer failures rank first, whatever the cost
+    assert order["kf<=raw"] is None and np.isnan(order["kf"]) and np.isnan(order["raw"])
+    assert "| usv | moderate | default | 10.5 | n/a | n/a | n/a | True |" in text

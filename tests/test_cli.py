@@ -93,8 +93,10 @@ def test_episode_prints_rms_errors_and_writes_a_plot(tmp_path, capsys):
     summary = json.loads((tmp_path / "s.json").read_text())
     assert summary["seconds"] == pytest.approx(30.0) and summary["failed"] == 0.0
     assert summary["cost"] == pytest.approx(-summary["return"], rel=1e-9)
-    assert main(["episode", "marine_envs/ROV-v0", "--seconds", "-1"]) == 2
-    assert "seconds=-1" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stopped:  # argparse's own check, before any work
+        main(["episode", "marine_envs/ROV-v0", "--seconds", "-1"])
+    assert stopped.value.code == 2
+    assert "argument --seconds: -1 is invalid" in capsys.readouterr().err
 
 
 def test_episode_with_a_kalman_filter_controls_the_dp_vessel_on_its_estimate(tmp_path, capsys):

@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from marine_envs.models import MeasuredDisturbances, get_model
+from marine_envs.plausibility import PlausibilityWarning
 from marine_envs.recording import METADATA_KEY, Recording, read_recording, write_recording
 
 DT = 0.1
@@ -195,7 +196,10 @@ INVALID = {
     "no measured channel": (lambda f: f.drop(columns=["psi", "phi"]),
                             [r"no measured channel", r"v, r, psi, p, phi"]),
     "non-numeric": (lambda f: _set(f, "psi", 2, "abc"), [r"'psi'", r"not numeric", r"row 2"]),
-    "nan": (lambda f: _set(f, "phi", 3, np.nan), [r"'phi'", r"nan", r"row 3", r"time 0\.3 s"]),
+    "nan input": (lambda f: _set(f, "delta", 3, np.nan),
+                  [r"'delta'", r"nan", r"row 3", r"time 0\.3 s"]),
+    "inf measurement": (lambda f: _set(f, "phi", 3, np.inf), [r"'phi'", r"inf", r"row 3"]),
+    "no measurement": (lambda f: f.assign(phi=np.nan), [r"'phi' has no value"]),
     "inf": (lambda f: _set(f, "delta", 4, -np.inf), [r"'delta'", r"-inf", r"row 4"]),
     "nan time": (lambda f: _set(f, "time", 1, np.nan), [r"'time'", r"row 1"]),
     "repeated time": (lambda f: _set(f, "time", 5, 0.4),
@@ -221,11 +225,60 @@ def test_invalid_table_raises_naming_column_or_row(case):
 
 
 def test_read_validates_and_names_file_and_row(tmp_path):
-    text = "time,delta,phi\n0.0,0.0,0.0\n0.1,0.0,\n0.2,0.0,0.0\n"  # empty cell: NaN in row 1
+    text = "time,delta,phi\n0.0,0.0,0.0\n0.1,,0.0\n0.2,0.0,0.0\n"  # empty input cell: row 1
     path = tmp_path / "run.csv"
     path.write_text(text)
-    with pytest.raises(ValueError, match=r"run\.csv: column 'phi' .* row 1 \(time 0\.1 s\)"):
+    with pytest.raises(ValueError, match=r"run\.csv: column 'delta' .* row 1 \(time 0\.1 s\)"):
         read_recording(path, model="usv")
+
+
+def test_a_dropped_measurement_is_missing_not_an_error(tmp_path):
+    path = tmp_path / "run.csv"  # empty cell and NaN: samples the logger dropped
+    path.write_text("time,delta,psi,phi\n0.0,0.0,0.0,0.0\n0.1,0.0,,0.2\n0.2,0.0,0.2,nan\n"
+                    "0.3,0.0,0.3,0.3\n")
+    rec = read_recording(path, model="usv")
+    np.testing.assert_array_equal(rec.missing, [[False, False], [True, False], [False, True],
+                                                [False, False]])
+    filled = rec.filled()  # linear in time between the neighbours, and marked
+    np.testing.assert_allclose(filled.measurements, [[0, 0], [0.1, 0.2], [0.2, 0.25],
+                                                     [0.3, 0.3]])
+    np.testing.assert_array_equal(filled.gaps, rec.missing)
+    write_recording(rec, tmp_path / "again.csv")  # written back as empty cells
+    np.testing.assert_array_equal(read_recording(tmp_path / "again.csv").missing, rec.missing)
+
+
+def test_window_cuts_and_decimates_on_the_records_clock():
+    n = 100
+    rec = Recording.from_arrays("usv", np.arange(n) * DT, np.zeros(n), {"phi": np.arange(n)})
+    cut = rec.window(start=2.0, stop=5.0, decimate=3)
+    np.testing.assert_allclose(cut.time, [2.0, 2.3, 2.6, 2.9, 3.2, 3.5, 3.8, 4.1, 4.4, 4.7, 5.0])
+    assert cut.meta["window"] == {"start": 2.0, "stop": 5.0, "decimate": 3}
+    with pytest.raises(ValueError, match=r"decimate=0 is invalid"):
+        rec.window(decimate=0)
+    with pytest.raises(ValueError, match=r"leave 1 sample\(s\)"):
+        rec.window(start=9.85)
+    with pytest.raises(ValueError, match=r"start < stop"):
+        rec.window(start=5.0, stop=2.0)
+
+
+@pytest.mark.parametrize("column, unit, values, text", [
+    ("delta", "rad", np.radians(35) * 57.3, r"delta: 35 exceeds the model's bound 0\.611 rad by "
+                                            r"57x: degrees declared as rad\?"),
+    ("delta", "deg", 0.5, r"delta: 0\.00873 rad is 1\.4% of the model's bound 0\.611 rad: "
+                          r"radians declared as deg\?"),
+    ("phi", "rad", 30.0, r"phi: 30 rad exceeds 2 pi: degrees declared as rad\?"),
+])
+def test_implausible_units_are_named_with_the_likely_mistake(tmp_path, column, unit, values, text):
+    n, wave = 50, np.sin(np.linspace(0, 6, 50)) / np.sin(np.linspace(0, 6, 50)).max()
+    frame = pd.DataFrame({"time": np.arange(n) * DT, "delta": 0.1 * wave, "psi": 0.2 * wave,
+                          "phi": 0.05 * wave})  # plausible in radians
+    frame[column] = values * wave
+    path = tmp_path / "run.csv"
+    frame.to_csv(path, index=False)
+    (tmp_path / "run.csv.json").write_text(json.dumps({"model": "usv", "units": {column: unit}}))
+    with pytest.warns(PlausibilityWarning, match=r"run\.csv: " + text):
+        rec = read_recording(path)
+    assert len(rec.warnings) == 1 and re.search(text, rec.warnings[0])
 
 
 def test_read_reports_non_numeric_cell(tmp_path):

@@ -34,20 +34,24 @@ def ordering(rows: pd.DataFrame, controller: str = "lqr") -> pd.DataFrame:
     sensors under ``controller``, and whether KF <= raw and true <= KF (LQR behind a KF that
     estimates the disturbances feeds them forward, which the true state alone cannot: it may
     beat the true state). Fewer failed episodes rank first; equal costs of episodes that failed
-    are not comparable (None), nor is a row with an estimator missing."""
+    are not comparable (None), nor is a row with an estimator missing. The cost of a cell whose
+    every episode failed is NaN: a sum over truncated episodes is no cost to compare."""
     table = summary_table(rows)
     table = table[table["controller"] == controller]
     index = ["vehicle", "sea", "sensor"]
-    wide = table.pivot_table(index=index, columns="estimator", values=["cost", "failed"],
-                             sort=False)
+    wide = table.pivot_table(index=index, columns="estimator",
+                             values=["cost", "failed", "episodes"], sort=False)
     out = pd.DataFrame(index=wide.index)
     for name in (ORACLE, "kf", RAW):
-        out[name] = wide["cost"][name] if name in wide["cost"] else np.nan
-        out[f"failed_{name}"] = wide["failed"][name] if name in wide["failed"] else np.nan
+        for key, prefix in (("cost", ""), ("failed", "failed_"), ("episodes", "episodes_")):
+            out[prefix + name] = wide[key][name] if name in wide[key] else np.nan
     records = out.to_dict("records")
     out["kf<=raw"] = [_ordered(r, ("kf", RAW)) for r in records]
     out["true<=kf"] = [_ordered(r, (ORACLE, "kf")) for r in records]
-    return out.drop(columns=[f"failed_{n}" for n in (ORACLE, "kf", RAW)]).reset_index()
+    for name in (ORACLE, "kf", RAW):  # after the verdicts, which count the failures
+        out.loc[out[f"failed_{name}"] >= out[f"episodes_{name}"], name] = np.nan
+    return out.drop(columns=[f"{p}_{n}" for n in (ORACLE, "kf", RAW)
+                             for p in ("failed", "episodes")]).reset_index()
 
 
 def _ordered(row: Mapping[str, float], names: Sequence[str]) -> bool | None:
@@ -67,12 +71,15 @@ def _ordered(row: Mapping[str, float], names: Sequence[str]) -> bool | None:
 
 
 def _cell_text(cost: float, spread: float, failed: float, episodes: int) -> str:
+    if failed >= episodes:  # truncated episodes only: their cost compares with nothing
+        return f"all {episodes} failed"
     text = f"{cost:.4g} ± {0.0 if np.isnan(spread) else spread:.2g}"
     return text + (f" ({int(failed)}/{episodes} failed)" if failed else "")
 
 
 COST_NOTE = ("Task cost: the environment's quadratic LQR cost summed over the episode (lower is "
-             "better), mean ± std over seeds; n/a: the cell does not apply.")
+             "better), mean ± std over seeds; n/a: the cell does not apply, or (orderings) "
+             "cannot be told: a cell whose every episode failed has no cost.")
 ORDER_TITLE = "KF <= raw sensors, true state <= KF (LQR)"
 
 
@@ -90,13 +97,19 @@ def _summary_frames(rows: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame, lis
     return wide, ordering(rows), reasons
 
 
+def _cell(v: Any) -> str:
+    """A table cell: numbers to 4 digits, "n/a" where there is nothing to tell (not "None"
+    or "nan")."""
+    if v is None or (isinstance(v, float) and np.isnan(v)):
+        return "n/a"
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
 def _markdown_table(frame: pd.DataFrame) -> str:
-    def text(v: Any) -> str:
-        return f"{v:.4g}" if isinstance(v, float) else str(v)
 
     lines = ["| " + " | ".join(map(str, frame.columns)) + " |",
              "|" + "---|" * len(frame.columns)]
-    lines += ["| " + " | ".join(text(v) for v in row) + " |"
+    lines += ["| " + " | ".join(_cell(v) for v in row) + " |"
               for row in frame.itertuples(index=False)]
     return "\n".join(lines)
 
@@ -230,7 +243,8 @@ def write_report(rows: pd.DataFrame, out: Path, report: Path, grid: Grid) -> Pat
              f"<p>Grid: {_html_escape(json.dumps(dataclasses.asdict(grid)))}</p>",
              f"<p>{COST_NOTE}</p>", wide.to_html(index=False)]
     if len(order):
-        parts += [f"<h2>{ORDER_TITLE}</h2>", order.to_html(index=False, float_format="%.4g")]
+        shown = order.astype(object).map(_cell)  # "n/a", not None / NaN
+        parts += [f"<h2>{ORDER_TITLE}</h2>", shown.to_html(index=False)]
     if skipped:
         parts += ["<h2>Cells that do not apply</h2><ul>",
                   *[f"<li>{_html_escape(line)}</li>" for line in skipped], "</ul>"]

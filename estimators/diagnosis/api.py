@@ -57,6 +57,15 @@ BoolArray = NDArray[np.bool_]
 MIN_SAMPLES, MIN_DURATION = 300, 60.0
 #: How a recording is judged (see :func:`diagnose`).
 METHODS = ("auto", "free", "innovations")
+#: The stages of a record in a seaway, as :func:`diagnose` reports them to ``stage``.
+SEAWAY_STAGES = ("calibrating", "smoothing", "searching", "re-smoothing", "validating")
+#: Called at the start of each stage: its name, its index from 0, and the number of stages.
+Stage = Callable[[str, int, int], None]
+#: Run time of a record in a seaway per model: (seconds, seconds per sample), measured on 2
+#: cores (3000 and 6000 samples, no calibration); other models: the default.
+SEAWAY_SECONDS = {"usv": (0.5, 7e-4), "rov": (9.0, 3.2e-3), "dp_vessel": (0.8, 9e-4),
+                  "hovercraft": (2.4, 8e-4), "hydrofoil": (2.5, 4.5e-4)}
+DEFAULT_SECONDS = (1.0, 1e-3)
 #: A channel moves "beyond its noise" when its spread exceeds this many noise deviations (5
 #: refused hovercraft records under a dithered autopilot whose surge speed spread 3.8x its
 #: sensor noise, and which the diagnosis reads right).
@@ -74,7 +83,8 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
              model: str | VehicleModel | None = None, *,
              params: Mapping[str, float] | str | Path | None = None,
              calibrate: Sequence[str] | str = (), config: DiagnosisConfig | None = None,
-             method: str = "auto", log: Callable[[str], None] | None = None) -> Diagnosis:
+             method: str = "auto", log: Callable[[str], None] | None = None,
+             stage: Stage | None = None) -> Diagnosis:
     """Diagnose why ``model`` and a recording (or a series of recordings) disagree.
 
     :param recording: a :class:`~marine_envs.recording.Recording` or a path to one, or a
@@ -90,6 +100,15 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
         a record in a seaway; ``"auto"``: free simulation for a series or a free decay (inputs
         held), the innovations otherwise.
     :param log: called with a line on what the (seconds-long) search is doing.
+    :param stage: called at the start of each stage with its name, index and the number of
+        stages (:data:`SEAWAY_STAGES`, or :data:`.model_test.FREE_STAGES`): for a progress bar.
+
+    A sample a logger dropped (NaN in a measured channel) is a missing measurement: the
+    filters predict through it, and the free simulation compares with the record's value
+    interpolated from its neighbours (``missing_samples`` counts them per channel). Values
+    that look like unit mistakes (:attr:`~marine_envs.recording.Recording.warnings`) are
+    listed in ``warnings``.
+
     :raises ValueError: invalid ``params``, ``calibrate`` or ``method`` (naming the entry), or a
         recording that is not valid for the model (naming the column); all before any work.
     """
@@ -104,6 +123,45 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
         raise ValueError("no recording given")
     recordings = [r if isinstance(r, Recording) else _named(read_recording(
         r, model=None if vehicle is None else vehicle.name), r) for r in sources]
+    notes = {"warnings": [w for rec in recordings for w in rec.warnings],
+             "missing_samples": _missing(recordings)}
+    if notes["missing_samples"] and log is not None:
+        log("missing samples taken as dropped measurements: " + ", ".join(
+            f"{c} {n}" for c, n in notes["missing_samples"].items()))
+    recordings = [rec.filled() if rec.missing.any() else rec for rec in recordings]
+    diagnosis = _diagnose(recordings, vehicle, overrides, calibrate, config, method, log, stage)
+    diagnosis.warnings, diagnosis.missing_samples = notes["warnings"], notes["missing_samples"]
+    return diagnosis
+
+
+def expected_seconds(recordings: Sequence[Recording], method: str = "auto",
+                     calibrate: bool = False) -> float | None:
+    """A rough run time of :func:`diagnose`, s, from the records' length and the model's
+    measured rate (:data:`SEAWAY_SECONDS`; a calibration smooths twice more); None for free
+    simulation (model tests), which resamples to the model's bandwidth: seconds for a linear
+    model, minutes for a nonlinear one."""
+    if method == "free" or (method == "auto" and _model_test(recordings)):
+        return None
+    fixed, per_sample = SEAWAY_SECONDS.get(recordings[0].model, DEFAULT_SECONDS)
+    samples = sum(len(rec.time) for rec in recordings)
+    return (fixed + per_sample * samples) * (2.0 if calibrate else 1.0)
+
+
+def _missing(recordings: Sequence[Recording]) -> dict[str, int]:
+    """Missing samples per measured channel over ``recordings`` (channels with some)."""
+    counts: dict[str, int] = {}
+    for rec in recordings:
+        for name, n in zip(rec.measured_names, rec.missing.sum(axis=0).tolist(), strict=True):
+            if n:
+                counts[name] = counts.get(name, 0) + int(n)
+    return counts
+
+
+def _diagnose(recordings: list[Recording], vehicle: VehicleModel | None,
+              overrides: dict[str, float], calibrate: Sequence[str] | str,
+              config: DiagnosisConfig, method: str, log: Callable[[str], None] | None,
+              stage: Stage | None) -> Diagnosis:
+    """:func:`diagnose` of recordings read and complete (gaps filled and marked)."""
     vehicle = get_model(recordings[0].model) if vehicle is None else vehicle
     overrides = {**recordings[0].params, **overrides}
     vehicle = vehicle.with_params(**overrides) if overrides else vehicle
@@ -113,17 +171,22 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
             return Diagnosis(vehicle.name, None, _other_model(rec, vehicle))
     vehicle = _with_measured_disturbances(vehicle, recordings)
     if method == "free" or (method == "auto" and _model_test(recordings)):
-        diagnosis = diagnose_series(recordings, vehicle, calibrate, log=log)
+        diagnosis = diagnose_series(recordings, vehicle, calibrate, log=log, stage=stage)
     else:
-        diagnosis = _seaway(recordings, vehicle, calibrate, config, log)
+        diagnosis = _seaway(recordings, vehicle, calibrate, config, log, stage)
     if isinstance(vehicle, MeasuredDisturbances):
         diagnosis.measured_disturbances = vehicle.measured_disturbances
     return diagnosis
 
 
 def _seaway(recordings: Sequence[Recording], vehicle: VehicleModel, calibrate: Sequence[str],
-            config: DiagnosisConfig, log: Callable[[str], None] | None) -> Diagnosis:
+            config: DiagnosisConfig, log: Callable[[str], None] | None,
+            stage: Stage | None = None) -> Diagnosis:
     """Steps 2-5 of the module doc, for one record in a seaway."""
+    def begin(name: str) -> None:
+        if stage is not None:
+            stage(name, SEAWAY_STAGES.index(name), len(SEAWAY_STAGES))
+
     if len(recordings) > 1:
         raise ValueError("a series of recordings is judged in free simulation only: "
                          "use method='free' (or 'auto')")
@@ -137,7 +200,9 @@ def _seaway(recordings: Sequence[Recording], vehicle: VehicleModel, calibrate: S
     calibration: dict[str, float] = {}
     quality: dict[str, Any] = {}
     if calibrate:
+        begin("calibrating")
         vehicle, calibration, quality = _calibrate(recording, vehicle, calibrate)
+    begin("smoothing")
     residuals = estimate(recording, vehicle)
     if not residuals.observable.any():
         return Diagnosis(vehicle.name, None, "the measured channels observe no state")
@@ -145,8 +210,11 @@ def _seaway(recordings: Sequence[Recording], vehicle: VehicleModel, calibrate: S
     # a missing actuator effect can make the nominal predict worse than holding (a flap's
     # delay or dead zone), so a model is called wrong only if its findings cannot mend it
     nominal = _worse_than_holding(rollouts, rollouts.errors([]), rollouts.fit)
+    begin("searching")
     first = select(residuals, config)
+    begin("re-smoothing")
     selection = _resmoothed(recording, residuals, first, config)
+    begin("validating")
     diagnosis = _judged(vehicle, residuals, rollouts, selection, config)
     if selection is not first and diagnosis.unconfirmed:
         # the innovations' response to a term is linearised about the nominal states, so a

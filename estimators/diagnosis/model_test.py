@@ -31,6 +31,8 @@ from .result import Diagnosis, Finding
 
 #: A parameter whose standard deviation exceeds this share of its value is not identified.
 MAX_RELATIVE_STD = 0.5
+#: The stages of a model test, as :func:`diagnose_series` reports them to ``stage``.
+FREE_STAGES = ("resampling", "calibrating and comparing")
 #: A held-out mean square error beyond this share of the signal's variance: free simulation
 #: does not follow the records at all (they are driven by what the model is not given).
 MAX_UNFOLLOWED = 0.5
@@ -38,10 +40,17 @@ MAX_UNFOLLOWED = 0.5
 
 def diagnose_series(recordings: Sequence[Recording], vehicle: VehicleModel,
                     calibrate: Sequence[str] = (), config: ComparisonConfig | None = None,
-                    log: Callable[[str], None] | None = None) -> Diagnosis:
-    """Diagnose model tests in free simulation (module doc); one parameter set for all."""
+                    log: Callable[[str], None] | None = None,
+                    stage: Callable[[str, int, int], None] | None = None) -> Diagnosis:
+    """Diagnose model tests in free simulation (module doc); one parameter set for all.
+
+    :param stage: called at the start of each of :data:`FREE_STAGES` with its name, index and
+        their number.
+    """
     config = config or ComparisonConfig()
     say = log or (lambda _line: None)
+    begin = stage or (lambda _name, _k, _n: None)
+    begin(FREE_STAGES[0], 0, len(FREE_STAGES))
     series = Series.from_recordings(recordings, vehicle, calibrate)
     problem = _too_little(series, calibrate)
     if problem:
@@ -56,6 +65,7 @@ def diagnose_series(recordings: Sequence[Recording], vehicle: VehicleModel,
     say(f"free simulation of {len(series.runs)} recording(s) at {series.dt:.3g} s steps: "
         f"calibrating {', '.join(calibrate) or 'the initial states'} and comparing nested "
         "models on held-out data (seconds for a linear model, minutes for a nonlinear one)...")
+    begin(FREE_STAGES[1], 1, len(FREE_STAGES))
     comparison = compare(series, calibrate, start, config)
     if comparison.final_held_out.mean_square > MAX_UNFOLLOWED:
         share = math.sqrt(comparison.final_held_out.mean_square)

@@ -52,6 +52,18 @@ fitted curve follows the cloud of equation errors."""
 
 
 # -- the entry point ------------------------------------------------------------------------------
+#: What :func:`write_report` writes into its folder (file names and patterns), both kinds of
+#: record: a rerun over an older report clears exactly these.
+OWNED = ("report.md", "diagnosis.json", "prediction_errors.png", "spectra.png",
+         "finding_*.png", "time_histories.png", "simulation_errors.png", "extinction.png")
+
+
+def owned_files(directory: str | Path) -> list[Path]:
+    """The files of a report (:data:`OWNED`) in ``directory``."""
+    directory = Path(directory)
+    return sorted({p for pattern in OWNED for p in directory.glob(pattern) if p.is_file()})
+
+
 def write_report(diagnosis: Diagnosis, directory: str | Path, recording_name: str = "") -> Path:
     """Write ``report.md``, its figures and ``diagnosis.json`` into ``directory`` (created).
 

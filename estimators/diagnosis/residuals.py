@@ -212,10 +212,13 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
 
     The process noise of each later pass is fitted to the previous pass's equation errors, so
     the smoother follows the data wherever the model is wrong; the last pass models the
-    forcing of the measured force equations as coloured (module doc).
+    forcing of the measured force equations as coloured (module doc). Samples a logger dropped
+    (:attr:`~marine_envs.recording.Recording.gaps` of a filled recording) are missing
+    measurements to the filter: it predicts through them.
     """
     channels = recording.measured_names
     y = recording.measurements.copy()
+    mask = None if recording.gaps is None else ~recording.gaps
     for j, name in enumerate(channels):
         if name in ANGLES:
             y[:, j] = np.unwrap(y[:, j])
@@ -232,7 +235,7 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
     for k in range(passes):
         ekf = _filter(model, dt, channels, q, noise, x0, P0, substeps, forcing)
         with np.errstate(over="ignore", invalid="ignore"):  # checked just below
-            smoothed = ekf.smooth(u, y)
+            smoothed = ekf.smooth(u, y, mask)
             x = smoothed.x[:, 0, :n]
             error = equation_error(model, x, u, dt, substeps)
             variance = np.maximum(np.var(error, axis=0), 1e-12 * (np.var(x, axis=0) + 1e-12))
@@ -248,7 +251,7 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
             for _ in range(ENVIRONMENT_PASSES if _split(forcing)[1] else 0):
                 with np.errstate(over="ignore", invalid="ignore"):
                     forcing = environment_statistics(model, dt, channels, q, noise, x0, P0,
-                                                     substeps, forcing, u, y)
+                                                     substeps, forcing, u, y, mask)
             _check_finite(model, _statistics(forcing))
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
                      error, noise, observable_states(model, channels), substeps,
@@ -354,18 +357,19 @@ def _environment_prior(model: VehicleModel, x: FloatArray, u: FloatArray,
 
 def environment_statistics(model: VehicleModel, dt: float, channels: tuple[str, ...],
                            q: FloatArray, noise: FloatArray, x0: FloatArray, P0: FloatArray,
-                           substeps: int, forcing: list[Forcing], u: FloatArray, y: FloatArray
-                           ) -> list[Forcing]:
+                           substeps: int, forcing: list[Forcing], u: FloatArray, y: FloatArray,
+                           mask: NDArray[np.bool_] | None = None) -> list[Forcing]:
     """The environment channels' Gauss-Markov statistics from the filter itself: smoothed as
     states under their present statistics, then each series' decorrelation time and variance,
     the latter at most the present one (the first is the broad prior of
     :func:`forcing_model`: a smoother free to move the environment would take a missing term
     for it). The equation errors alone cannot show a slow current or wind: under control the
-    thrust that holds against it is a function of the input, which their fit removes."""
+    thrust that holds against it is a function of the input, which their fit removes.
+    ``mask``: the valid measurements ``(T, m)`` (None: all)."""
     own, environment = _split(forcing)
     start = len(model.state_names) + len(own)
     z = _filter(model, dt, channels, q, noise, x0, P0, substeps, own + environment
-                ).smooth(u, y).x[:, 0, start:start + len(environment)]
+                ).smooth(u, y, mask).x[:, 0, start:start + len(environment)]
     return own + [replace(f, tau=_decorrelation_time(e, dt, f.tau),
                           variance=min(float(np.var(e)), f.variance))
                   for f, e in zip(environment, z.T, strict=True)]

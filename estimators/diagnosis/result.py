@@ -70,6 +70,10 @@ class Diagnosis:
     not_kept: list[dict[str, Any]] = field(default_factory=list)
     #: recorded disturbances the model took as known inputs (a logged wind, current, command)
     measured_disturbances: tuple[str, ...] = ()
+    #: the recordings' implausible values (unit mistakes?), one line each
+    warnings: list[str] = field(default_factory=list)
+    #: samples a logger dropped per channel (NaN in the record), taken as missing measurements
+    missing_samples: dict[str, int] = field(default_factory=dict)
     residuals: Residuals | None = field(default=None, repr=False)
     rollouts: Rollouts | None = field(default=None, repr=False)
     selection: Selection | None = field(default=None, repr=False)
@@ -96,6 +100,9 @@ class Diagnosis:
                 out[key] = getattr(self, key)
         if self.measured_disturbances:
             out["measured_disturbances"] = list(self.measured_disturbances)
+        for key in ("warnings", "missing_samples"):
+            if getattr(self, key):
+                out[key] = getattr(self, key)
         if self.residuals is not None and self.residuals.forcing:
             out["noise_model"] = [_forcing_dict(f, self.residuals.model)
                                   for f in self.residuals.forcing]

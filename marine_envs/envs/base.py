@@ -21,6 +21,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
+from .. import plausibility
 from ..models.effects import Effect, read_effects
 from .core import Simulator
 from .rendering import TimeSeriesRenderer
@@ -86,6 +87,7 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
                  **kwargs: Any) -> None:
         _check_render_mode(render_mode, self.metadata)
         sim = _with_effects(self.make_simulator(**kwargs), effects)
+        plausibility.warn(plausibility.environment_arguments(self.make_simulator, kwargs), 3)
         self.sim, self.render_mode = sim, render_mode
         self._make_renderer = _renderer(type(self).renderer, sim)
         self.metadata = {**self.metadata, "render_fps": round(1 / sim.dt)}
@@ -243,6 +245,7 @@ def vector_env(single: type[MarineEnv], max_episode_steps: int = 1000) -> type[M
                  render_mode: str | None = None, effects: EffectsArg = (),
                  **kwargs: Any) -> None:
         sim = _with_effects(single.make_simulator(**kwargs), effects)
+        plausibility.warn(plausibility.environment_arguments(single.make_simulator, kwargs), 3)
         MarineVectorEnv.__init__(self, sim, num_envs, max_episode_steps, render_mode=render_mode,
                                  renderer=_renderer(single.renderer, sim))
 

@@ -146,6 +146,22 @@ class Actuation:
                              f"{self.high.tolist()} are invalid for {self.names}: low < high")
 
 
+#: RK4's stability limit on the real axis: ``|lambda| h`` beyond it grows every step.
+RK4_STABILITY = 2.78
+
+
+def _check_rk4_stable(model: VehicleModel, dt: float, substeps: int) -> None:
+    """:raises ValueError: RK4 steps of ``dt / substeps`` s are unstable for the fastest mode
+    of ``model`` linearised at its nominal point (the run would diverge)."""
+    A, _, _ = model.linearize()
+    fastest = float(np.max(np.abs(np.linalg.eigvals(A)))) if A.size else 0.0
+    if fastest * dt / substeps > RK4_STABILITY:
+        limit = RK4_STABILITY * substeps / fastest
+        raise ValueError(f"dt={dt!r} is invalid: RK4 with {substeps} substep(s) is unstable for "
+                         f"the {model.name} model's fastest mode ({fastest:.3g} 1/s) above "
+                         f"dt = {limit:.3g} s (the run would diverge)")
+
+
 class Simulator:
     """Steps a batch of boats: disturbances -> dynamics -> cost -> sensors.
 
@@ -182,6 +198,8 @@ class Simulator:
             raise ValueError(f"integrator={integrator!r} is invalid: 'exact' or 'rk4'")
         if not (isinstance(substeps, int) and substeps >= 1):
             raise ValueError(f"substeps={substeps!r} is invalid: an integer >= 1")
+        if integrator == "rk4":
+            _check_rk4_stable(model, dt, substeps)
         unknown = sorted(set(sensors.channels) - set(model.output_names))
         if unknown:
             raise ValueError(f"sensor channel(s) {unknown} are not outputs of model "

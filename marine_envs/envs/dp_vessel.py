@@ -70,10 +70,15 @@ def make_dp_simulator(
     **sensor_options: Unpack[SensorOptions],
 ) -> Simulator:
     """The DP simulator; the keyword arguments are those of :class:`DPVesselEnv` (see there)."""
+    if not (math.isfinite(dt) and dt > 0):  # before the noise's 1/sqrt(dt) below
+        raise ValueError(f"dt={dt!r} is invalid: the control period must be > 0 s")
     model = DPVesselModel().with_params(**(params or {}))
     sensors = make_sensors(DPVesselModel.measured_names, DEFAULT_SENSORS, sensor_options,
                            wrap=("psi",))
-    unknown = sorted(set(setpoint or {}) - set(SETPOINT_STATES))
+    if setpoint is not None and not isinstance(setpoint, Mapping):
+        raise ValueError(f"setpoint={setpoint!r} is invalid: a mapping of north (m), east (m) "
+                         'and psi (rad), e.g. {"north": 0, "east": 0, "psi": 3.1416}')
+    unknown = sorted(set(setpoint or {}) - set(SETPOINT_STATES), key=str)
     if unknown:
         raise ValueError(f"setpoint: unknown key(s) {unknown}; known: north, east, psi")
     reference = {SETPOINT_STATES[k]: v for k, v in (setpoint or {}).items()}
