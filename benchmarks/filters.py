@@ -158,7 +158,7 @@ def plot(results: dict[str, Any], path: str) -> None:
                     f"{column} (agent)")
         ax.set(xscale="log", yscale="log", title=vehicle, xlabel="sensor noise x default")
         ax.set_xticks(factors, [f"{f:g}" for f in factors])
-    axes[0][0].set_ylabel("cost (held-out seeds); LQR behind each estimator")
+    axes[0][0].set_ylabel("cost (held-out seeds)")
     for ax in axes[0]:
         ax.legend(fontsize=6)
     fig.tight_layout()
