@@ -29,7 +29,7 @@ from marine_envs.sea.spectra import PM_WP_COEF
 from marine_envs.sea.waves import WaveRealisation
 
 from .base import Estimator
-from .disturbance import augmented_system, disturbance_model
+from .disturbance import augmented_system
 from .kalman import KalmanFilter
 
 FloatArray = NDArray[np.float64]
@@ -101,7 +101,7 @@ class MultipleModelFilter(Estimator):
         for f in self.filters:
             f.bind(batch_size)
         self.scores = np.zeros((batch_size, len(self.filters)))
-        self._mix()
+        self._weigh()
 
     def reset(self, x0: ArrayLike | None = None, P0: ArrayLike | None = None,
               idx: ArrayLike | None = None) -> None:
@@ -109,7 +109,7 @@ class MultipleModelFilter(Estimator):
             f.reset(x0, P0, idx)
         rows = slice(None) if idx is None else np.atleast_1d(np.asarray(idx))
         self.scores[rows] = 0.0
-        self._mix()
+        self._weigh()
 
     def predict(self, u: ArrayLike, dt: float | None = None) -> FloatArray:
         for f in self.filters:
@@ -129,17 +129,20 @@ class MultipleModelFilter(Estimator):
         scores = forget * self.scores + log_likelihood
         scores = np.maximum(scores - scores.max(axis=1, keepdims=True), -700.0)  # exp stays > 0
         self.scores = np.where(scored, scores, self.scores)
-        self._mix()
+        self._weigh()
         return self.x, self.P
 
     def _stack_x(self) -> FloatArray:
         return np.stack([f.x for f in self.filters], axis=1)  # (N, K, n)
 
-    def _mix(self) -> None:
-        """The bank's weights, estimate, innovation and health from its filters' and the
-        scores."""
+    def _weigh(self) -> None:
+        """The weights from the scores (their softmax), then the mixture."""
         w = np.exp(self.scores - self.scores.max(axis=1, keepdims=True))
         self.weights = w / w.sum(axis=1, keepdims=True)
+        self._mix()
+
+    def _mix(self) -> None:
+        """The bank's estimate, innovation and health from its filters' and the weights."""
         self.x = np.einsum("nk,nki->ni", self.weights, self._stack_x())
         self.innovation = np.einsum("nk,nki->ni", self.weights,
                                     np.stack([f.innovation for f in self.filters], axis=1))
@@ -163,9 +166,11 @@ def sea_bank_filter(env: Any, periods: Sequence[float] | None = None,
     :raises ValueError: the env has no wave channel, or was not made by ``gym.make``.
     """
     options, spec = vehicle_options(env), env.unwrapped.spec  # one env per candidate sea
-    if not disturbance_model(env.unwrapped.sim).wave_peaks:
+    try:
+        _sea(env.unwrapped.sim)
+    except ValueError:
         raise ValueError(f"{spec.id} has no wave-driven disturbance channel: its kf has no sea "
-                         "to estimate")
+                         "to estimate") from None
     tp0, hs0 = design_sea(spec.id, options)
     periods = [f * tp0 for f in PERIOD_FACTORS] if periods is None else periods
     heights = [f * hs0 for f in HEIGHT_FACTORS] if heights is None else heights
