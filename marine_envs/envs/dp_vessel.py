@@ -3,6 +3,7 @@ patent)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from typing import Any, Unpack
@@ -47,15 +48,23 @@ def _stationary_initial_state(model: DPVesselModel, spread: Mapping[str, float],
     # a square root by eigenvalues: a calm DOF (sigma_eta = 0) makes the covariance singular
     w, V = np.linalg.eigh((wave_cov + wave_cov.T) / 2)
     wave_root = V * np.sqrt(np.maximum(w, 0.0))
-    bias_std = np.asarray(p.sigma_b, dtype=float)
+    return _StationaryInitialState(position, np.asarray(p.sigma_b, dtype=float), wave_root)
 
-    def draw(rng: np.random.Generator) -> np.ndarray:
-        x = position(rng)
-        x[6:9] = bias_std * rng.standard_normal(3)
-        x[9:15] = wave_root @ rng.standard_normal(6)
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _StationaryInitialState:
+    """The LF position from ``position``; bias states of standard deviations ``bias_std``;
+    wave-frequency states ``wave_root @ n`` with ``n`` standard normal."""
+
+    position: InitialState
+    bias_std: np.ndarray
+    wave_root: np.ndarray
+
+    def __call__(self, rng: np.random.Generator) -> np.ndarray:
+        x = self.position(rng)
+        x[6:9] = self.bias_std * rng.standard_normal(3)
+        x[9:15] = self.wave_root @ rng.standard_normal(6)
         return x
-
-    return draw
 
 
 def make_dp_simulator(
