@@ -26,8 +26,10 @@ SENSORS_OFF = dict.fromkeys(("noise_std", "bias", "quantization", "sensor_range"
 def run_python(code: str, **env: str) -> subprocess.CompletedProcess:
     """``code`` in a fresh interpreter with this checkout first on the path."""
     path = os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])
+    environment = {**os.environ, "PYTHONPATH": path, **env}
+    environment.pop("MARINE_ENVS_QUIET", None)  # (tests/conftest.py sets it for the suite)
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": path, **env}, cwd=ROOT, timeout=600)
+                          env=environment, cwd=ROOT, timeout=600)
 
 
 # -- a light import ------------------------------------------------------------------------------
@@ -58,6 +60,17 @@ def test_a_cold_first_use_says_it_compiles_once_and_a_warm_one_says_nothing(tmp_
     warm = run_python(use, NUMBA_CACHE_DIR=cache)
     assert warm.returncode == 0, warm.stderr
     assert "compiling" not in warm.stderr
+
+
+def test_the_compile_note_can_be_silenced(monkeypatch, capsys):
+    from marine_envs import compiled
+
+    monkeypatch.setattr(compiled, "_ANNOUNCED", set())
+    for quiet, said in (("1", ""), ("", "compiling the Boat kernels (first use, ~5 s)\n")):
+        monkeypatch.setenv("MARINE_ENVS_QUIET", quiet)
+        with compiled.first_use("Boat"):
+            compiled._announce()  # what a miss of the disk cache calls
+        assert capsys.readouterr().err == said
 
 
 # -- None turns a sensor stage off ---------------------------------------------------------------

@@ -151,7 +151,8 @@ def _jonswap_norm(gamma: float, sigma_a: float, sigma_b: float) -> float:
     # u = 1 (the kink in sigma) is a node of both halves.
     u = np.concatenate([np.linspace(lo, 1.0, 4001), np.linspace(1.0, hi, 4001)[1:]])
     p = u**-5 * np.exp(-1.25 * u**-4)
-    return 1.0 + 5.0 * float(np.trapezoid(p * (_peak_enhancement(u, gamma, sigma_a, sigma_b) - 1), u))
+    excess = _peak_enhancement(u, gamma, sigma_a, sigma_b) - 1
+    return 1.0 + 5.0 * float(np.trapezoid(p * excess, u))
 
 
 def jonswap(
