@@ -159,7 +159,8 @@ class DPVesselEnv(MarineEnv):
       ``{"T_b": [500, 500, 500]}``.
     * ``setpoint``: ``{"north": m, "east": m, "psi": rad}`` (default the origin, heading north).
     * ``noise_std``, ``bias``, ``quantization``, ``sensor_range``, ``sample_period``, ``delay``,
-      ``dropout``: per channel (``north``, ``east``, ``psi``), a number or ``{channel: value}``.
+      ``dropout``: per channel (``north``, ``east``, ``psi``), a number or ``{channel: value}``;
+      None turns the stage off (:class:`~marine_envs.envs.core.SensorOptions`).
     * ``initial_spread``: ``{state: half-width}`` of the uniform initial LF state.
     * ``state_weights``, ``input_weights``: ``{name: weight}`` of the task cost.
     * ``max_offset``: drive-off distance, m (50).
