@@ -33,7 +33,7 @@ def run_python(code: str, **env: str) -> subprocess.CompletedProcess:
 
 
 # -- a light import ------------------------------------------------------------------------------
-@pytest.mark.parametrize("package", ["marine_envs", "estimators", "agents"])
+@pytest.mark.parametrize("package", ["marine_envs", "estimators", "agents", "agents.cli"])
 def test_import_leaves_the_heavy_modules_for_later(package):
     heavy = ["scipy.optimize", "scipy.signal", "scipy.stats", "scipy.linalg", "scipy.integrate",
              "matplotlib", "pandas", "torch", "stable_baselines3"]
