@@ -46,7 +46,6 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import NDArray
 
 from marine_envs.models import zoh
@@ -215,6 +214,8 @@ def _autocovariance(x: FloatArray, lags: int) -> FloatArray:
 
 def _combine(states: list[_State], n_channels: int, mean: Any, white: FloatArray
              ) -> DisturbanceModel:
+    import scipy.linalg  # (here: `import estimators` need not load it)
+
     names = tuple(name for state in states for name in state[0])
     C = np.zeros((n_channels, len(names)))
     column = 0
@@ -229,6 +230,8 @@ def _combine(states: list[_State], n_channels: int, mean: Any, white: FloatArray
 
 def _stack(parts: list[DisturbanceModel]) -> DisturbanceModel:
     """Models of consecutive channel groups side by side."""
+    import scipy.linalg  # (here: `import estimators` need not load it)
+
     def diag(attr: str) -> FloatArray:
         return scipy.linalg.block_diag(np.zeros((0, 0)), *(getattr(p, attr) for p in parts))
 
@@ -277,6 +280,8 @@ def augmented_system(env: Any, model_error: bool = True, prior: bool = True
     :param prior: start from the env's initial-state distribution (:func:`initial_prior`; else
         from the reference with unit covariance, as :class:`~estimators.kalman.KalmanFilter`).
     """
+    import scipy.linalg  # (here: `import estimators` need not load it)
+
     sim = env.unwrapped.sim
     model, dt = sim.model, sim.dt
     dist = disturbance_model(sim)

@@ -25,7 +25,6 @@ from functools import cache
 from typing import Any, NamedTuple
 
 import numpy as np
-import scipy.stats
 from numpy.typing import ArrayLike, NDArray
 
 from marine_envs.compiled import jit, local_array
@@ -406,6 +405,8 @@ class AdaptiveKalmanFilter(KalmanFilter):
     def __init__(self, F: ArrayLike, G: ArrayLike, H: ArrayLike, Q: ArrayLike, R: ArrayLike, *,
                  Q_max: ArrayLike, upper_quantile: float = 0.90, lower_quantile: float = 0.50,
                  **kwargs: Any) -> None:
+        import scipy.stats  # (here: `import estimators` need not load it)
+
         if not 0 < lower_quantile <= upper_quantile < 1:
             raise ValueError(f"quantiles lower={lower_quantile}, upper={upper_quantile} are "
                              "invalid: need 0 < lower <= upper < 1")

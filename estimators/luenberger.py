@@ -21,7 +21,6 @@ from abc import abstractmethod
 from collections.abc import Sequence
 
 import numpy as np
-import scipy.signal
 from numpy.typing import ArrayLike, NDArray
 
 from marine_envs.models import zoh
@@ -188,6 +187,8 @@ def observer_gain(A: ArrayLike, C: ArrayLike, poles: Sequence[float]) -> FloatAr
     :raises ValueError: ``(A, C)`` cannot be given those poles (unobservable mode, or a pole
         repeated more often than the number of outputs).
     """
+    import scipy.signal  # (here: `import estimators` need not load it)
+
     A, C = np.asarray(A, dtype=float), np.asarray(C, dtype=float)
     if len(poles) != A.shape[0]:
         raise ValueError(f"poles has {len(poles)} entries; expected {A.shape[0]}")

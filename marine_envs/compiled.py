@@ -15,14 +15,27 @@ stale machine code after the equations were edited, and a function made by a fac
 over the equations) would miss the cache in every new process (numba hashes the pickled closure,
 which holds a random identifier). :func:`jit` keys it instead on the source of the function and
 of every compiled function it reaches (globals by name, closure cells), recursively.
+
+First use: a vehicle's kernels take seconds to compile when the disk cache does not hold them.
+Code that may compile them runs inside :func:`first_use`; the first time the cache misses in
+there, the user is told on stderr, once per vehicle and process ("compiling the USV kernels
+(first use, ~5 s)"), unless the environment variable ``MARINE_ENVS_QUIET`` is set (to anything
+but "" or "0"). stderr, not :mod:`warnings` or :mod:`logging`: it is a note of progress,
+nothing to fix (a warning made an error by ``-W error`` would fail a run on a cold cache only),
+and it must show without a logging configuration (INFO is hidden by default); stdout stays the
+program's output.
 """
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 import hashlib
 import math
+import os
+import sys
 import types
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from functools import cache
 from typing import Any, TypeVar
 
@@ -71,6 +84,49 @@ if FunctionCache is not None:
 
         def _index_key(self, sig, codegen):
             return sig, codegen.magic_tuple(), fingerprint(self._py_func)
+
+        def load_overload(self, sig, target_context):
+            overload = super().load_overload(sig, target_context)
+            if overload is None:  # numba compiles it now
+                _announce()
+            return overload
+
+
+#: The vehicle whose kernels may compile now (:func:`first_use`), and those announced.
+_USING: contextvars.ContextVar[str | None] = contextvars.ContextVar("marine_envs_using",
+                                                                     default=None)
+_ANNOUNCED: set[str] = set()
+
+
+@contextlib.contextmanager
+def first_use(vehicle: str) -> Iterator[None]:
+    """Within it, the first compilation the disk cache cannot spare says so on stderr, once per
+    ``vehicle`` and process (module docstring).
+
+    :param vehicle: the vehicle's name as the user knows it ("USV").
+    """
+    token = _USING.set(vehicle)
+    try:
+        yield
+    finally:
+        _USING.reset(token)
+
+
+def _announce() -> None:
+    vehicle = _USING.get()
+    if vehicle is not None and vehicle not in _ANNOUNCED and not _quiet():
+        _ANNOUNCED.add(vehicle)
+        print(f"compiling the {vehicle} kernels (first use, ~5 s)", file=sys.stderr, flush=True)
+
+
+def _quiet() -> bool:
+    return os.environ.get("MARINE_ENVS_QUIET", "") not in ("", "0")
+
+
+def compile_for(dispatcher: Any, *args: Any) -> None:
+    """Compile ``dispatcher`` (made by :func:`jit`) for the types of ``args`` now, as a call
+    with them would (without running it); loaded from the disk cache when it holds it."""
+    dispatcher.compile(tuple(dispatcher.typeof_pyval(a) for a in args))
 
 
 def fingerprint(func: Callable[..., Any]) -> str:

@@ -32,6 +32,9 @@ def per_channel(name: str, value: float | Mapping[str, float] | None, channels: 
                 default: float = 0.0) -> FloatArray:
     """Expand a scalar or a ``{channel: value}`` mapping to one value per channel.
 
+    None, for every channel or as a channel's value, and a channel the mapping does not name
+    give ``default`` (for a sensor setting: that stage off on the channel).
+
     :raises ValueError: a channel name that is not one of ``channels``, naming the argument.
     """
     if value is None:
@@ -41,7 +44,7 @@ def per_channel(name: str, value: float | Mapping[str, float] | None, channels: 
         if unknown:
             raise ValueError(f"{name}: unknown channel(s) {unknown}; channels are "
                              f"{', '.join(channels)}")
-        return np.array([float(value.get(c, default)) for c in channels])
+        return np.array([default if value.get(c) is None else float(value[c]) for c in channels])
     return np.full(len(channels), float(value))
 
 

@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import scipy.signal
 from numpy.typing import ArrayLike
 
 from .config import FloatArray, WaveFrequencyConfig, _require_positive
@@ -31,6 +30,8 @@ def highpass_sos(dt: float, cutoff: float = 0.35, order: int = 10) -> FloatArray
     fs=2 pi / dt)`` (cut-off in rad/s; the bilinear transform is pre-warped to it). Sections,
     because a 10th-order transfer function's coefficients lose the poles to rounding at this low
     a digital cut-off (0.056)."""
+    import scipy.signal  # (here: `import estimators` need not load it)
+
     _require_positive("dt", dt)
     _require_positive("cutoff", cutoff)
     if cutoff >= math.pi / dt:
@@ -45,6 +46,8 @@ def highpass(y: ArrayLike, dt: float, cutoff: float = 0.35, order: int = 10,
     """The WF motion of records ``y`` ``(T, ...)``: linear detrend, then the Butterworth
     high-pass along axis 0 (see :func:`highpass_sos`), forward-backward with reflected padding
     (``zero_phase``) or causal from the first sample's steady state."""
+    import scipy.signal  # (here: `import estimators` need not load it)
+
     a = scipy.signal.detrend(np.asarray(y, dtype=float), axis=0)
     sos = highpass_sos(dt, cutoff, order)
     if zero_phase:
@@ -55,6 +58,8 @@ def highpass(y: ArrayLike, dt: float, cutoff: float = 0.35, order: int = 10,
 
 
 def _highpass_power(w: FloatArray, dt: float, config: WaveFrequencyConfig) -> FloatArray:
+    import scipy.signal  # (here: `import estimators` need not load it)
+
     _, h = scipy.signal.sosfreqz(highpass_sos(dt, config.cutoff, config.order), worN=w,
                                  fs=2 * math.pi / dt)
     return np.abs(h) ** (4 if config.zero_phase else 2)

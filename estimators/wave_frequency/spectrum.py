@@ -7,7 +7,6 @@ import dataclasses
 import math
 
 import numpy as np
-import scipy.signal
 from numpy.typing import ArrayLike
 
 from .config import WF_BAND, FloatArray
@@ -82,6 +81,8 @@ def spectral_peak(y: ArrayLike, dt: float, band: tuple[float, float] = WF_BAND,
     :param band: the searched band, rad/s.
     :param damping: the WF model's relative damping, -.
     """
+    import scipy.signal  # (here: `import estimators` need not load it)
+
     a = np.asarray(y, dtype=float)
     shape = a.shape[1:]
     a = a.reshape(a.shape[0], -1)

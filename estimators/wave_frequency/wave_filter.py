@@ -7,7 +7,6 @@ import math
 from typing import Any
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import ArrayLike
 
 from marine_envs.models.dp_vessel import DPVesselModel, DPVesselParams
@@ -213,6 +212,8 @@ def _frequencies(name: str, value: ArrayLike) -> FloatArray:
 def _default_P0(model: DPVesselModel) -> FloatArray:
     """Initial covariance: 5 m, 5 m, 5 deg of LF position, 0.5 m/s, 0.5 m/s, 1 deg/s, the bias's
     and the WF states' stationary spread."""
+    import scipy.linalg  # (here: `import estimators` need not load it)
+
     p = model.params
     wave = scipy.linalg.solve_continuous_lyapunov(p.A_w, -p.E_w @ p.E_w.T)
     P0 = np.zeros((15, 15))

@@ -9,6 +9,7 @@ is minus the task's quadratic cost.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, ClassVar
@@ -22,6 +23,7 @@ from gymnasium.vector.utils import batch_space
 from numpy.typing import NDArray
 
 from .. import plausibility
+from ..compiled import first_use
 from ..models.effects import Effect, read_effects
 from .core import Simulator
 from .rendering import TimeSeriesRenderer
@@ -53,10 +55,15 @@ def _check_render_mode(render_mode: str | None, metadata: dict[str, Any]) -> Non
 
 def _renderer(renderer: Renderer | None, sim: Simulator) -> RendererFactory:
     """The vehicle's renderer, or strip charts of the states the task weighs and the inputs."""
-    if renderer is not None:
-        return lambda: renderer(sim.model)
+    if renderer is not None:  # (partials, not lambdas: an environment pickles)
+        return functools.partial(renderer, sim.model)
     weighted = tuple(n for n, q in zip(sim.model.state_names, sim.task.q, strict=True) if q > 0)
-    return lambda: TimeSeriesRenderer(sim.model, weighted)
+    return functools.partial(TimeSeriesRenderer, sim.model, weighted)
+
+
+def _vehicle(env_class: type) -> str:
+    """The vehicle's name as in its environment's id: ``USVVectorEnv`` -> "USV"."""
+    return env_class.__name__.removesuffix("VectorEnv").removesuffix("Env")
 
 
 def _spaces(sim: Simulator) -> tuple[spaces.Box, spaces.Box]:
@@ -86,14 +93,15 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     def __init__(self, render_mode: str | None = None, effects: EffectsArg = (),
                  **kwargs: Any) -> None:
         _check_render_mode(render_mode, self.metadata)
-        sim = _with_effects(self.make_simulator(**kwargs), effects)
+        with first_use(_vehicle(type(self))):  # the model's equations, the step kernel
+            sim = _with_effects(self.make_simulator(**kwargs), effects)
+            sim.bind(1)
         plausibility.warn(plausibility.environment_arguments(self.make_simulator, kwargs), 3)
         self.sim, self.render_mode = sim, render_mode
         self._make_renderer = _renderer(type(self).renderer, sim)
         self.metadata = {**self.metadata, "render_fps": round(1 / sim.dt)}
         self.action_space, self.observation_space = _spaces(sim)
         self.dt = sim.dt
-        sim.bind(1)
         self._renderer = None
 
     @property
@@ -105,7 +113,8 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
         """Start an episode. ``options={"state": x0}`` sets the initial true state (state units)."""
         super().reset(seed=seed)
         x0 = _initial_state(self.sim, options)
-        self.sim.reset(_ONE, [self.np_random], x0=x0)
+        with first_use(_vehicle(type(self))):  # the disturbances' filters
+            self.sim.reset(_ONE, [self.np_random], x0=x0)
         obs = self.sim.measure()[0].astype(np.float32)
         return obs, self._info()
 
@@ -161,7 +170,8 @@ class MarineVectorEnv(VectorEnv):
         self.single_action_space, self.single_observation_space = _spaces(sim)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        sim.bind(self.num_envs)
+        with first_use(_vehicle(type(self))):  # the step kernel
+            sim.bind(self.num_envs)
         self._rngs: list[np.random.Generator] = []
         self._done = np.zeros(self.num_envs, dtype=bool)
         self._all = np.arange(self.num_envs)
@@ -180,7 +190,8 @@ class MarineVectorEnv(VectorEnv):
                 raise ValueError(f"seed: {len(seeds)} seeds for {self.num_envs} environments")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
         x0 = _initial_state(self.sim, options)
-        self.sim.reset(self._all, self._rngs, x0=x0)
+        with first_use(_vehicle(type(self))):  # the disturbances' filters
+            self.sim.reset(self._all, self._rngs, x0=x0)
         self._done[:] = False
         return self.sim.measure().astype(np.float32), self._info()
 
@@ -244,7 +255,8 @@ def vector_env(single: type[MarineEnv], max_episode_steps: int = 1000) -> type[M
                  max_episode_steps: int | None = max_episode_steps,
                  render_mode: str | None = None, effects: EffectsArg = (),
                  **kwargs: Any) -> None:
-        sim = _with_effects(single.make_simulator(**kwargs), effects)
+        with first_use(_vehicle(single)):  # the model's equations
+            sim = _with_effects(single.make_simulator(**kwargs), effects)
         plausibility.warn(plausibility.environment_arguments(single.make_simulator, kwargs), 3)
         MarineVectorEnv.__init__(self, sim, num_envs, max_episode_steps, render_mode=render_mode,
                                  renderer=_renderer(single.renderer, sim))

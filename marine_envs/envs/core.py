@@ -71,7 +71,12 @@ def make_task(model: VehicleModel, weights: Mapping[str, float], input_weights: 
 
 class SensorOptions(TypedDict, total=False):
     """Sensor settings every environment accepts: per channel, a number for all channels or
-    ``{channel: value}``, SI units (see :meth:`SensorSuite.standard`); None = the default."""
+    ``{channel: value}``, SI units (see :meth:`SensorSuite.standard`).
+
+    A setting left out is the environment's default. None turns the stage off: no noise, no bias,
+    no quantization, no full scale, a sample every control step, no delay, no dropout. A mapping
+    sets the channels it names; a channel it leaves out, or maps to None, has the stage off
+    (``quantization={"psi": None}`` and ``quantization={}`` quantize no channel)."""
 
     noise_std: float | Mapping[str, float] | None
     bias: float | Mapping[str, float] | None
@@ -85,7 +90,8 @@ class SensorOptions(TypedDict, total=False):
 def make_sensors(channels: Sequence[str], defaults: Mapping[str, Any],
                  options: Mapping[str, Any], **fixed: Any) -> SensorSuite:
     """An environment's sensor suite: each :class:`SensorOptions` setting from ``options`` when
-    the user gave it (not None), else from the environment's ``defaults``.
+    the user gave it (None too: it turns the stage off), else from the environment's
+    ``defaults``.
 
     :param options: the environment's remaining keyword arguments; any other name is an error.
     :param fixed: further arguments of :meth:`SensorSuite.standard` (``wrap``, ``quantizer``).
@@ -94,7 +100,7 @@ def make_sensors(channels: Sequence[str], defaults: Mapping[str, Any],
     unknown = sorted(set(options) - set(SensorOptions.__annotations__))
     if unknown:
         raise ValueError(f"unknown argument(s) {unknown}; see the environment's docstring")
-    chosen = {k: defaults.get(k) if options.get(k) is None else options[k]
+    chosen = {k: options[k] if k in options else defaults.get(k)
               for k in SensorOptions.__annotations__}
     return SensorSuite.standard(channels, **chosen, **fixed)
 
@@ -106,14 +112,22 @@ def uniform_initial_state(model: VehicleModel, spread: Mapping[str, float],
     if not np.all(np.isfinite(half_width) & (half_width >= 0)):
         raise ValueError(f"initial_spread={dict(spread)!r} is invalid: half-widths >= 0")
     middle = model.x0 if centre is None else np.asarray(centre, dtype=float)
-
-    def draw(rng: np.random.Generator) -> FloatArray:
-        return middle + half_width * rng.uniform(-1.0, 1.0, half_width.size)
-
-    return draw
+    return UniformInitialState(middle, half_width)
 
 
 InitialState = Callable[[np.random.Generator], FloatArray]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class UniformInitialState:
+    """Initial states uniform within ``middle +- half_width`` (state units); a class, not a
+    closure, so that an environment pickles."""
+
+    middle: FloatArray
+    half_width: FloatArray
+
+    def __call__(self, rng: np.random.Generator) -> FloatArray:
+        return self.middle + self.half_width * rng.uniform(-1.0, 1.0, self.half_width.size)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -321,16 +335,20 @@ class Simulator:
 
     def __getstate__(self) -> dict:
         # the compiled path holds compiled objects: rebuilt on unpickling (and in deep copies)
+        # from the arrays it shares with the simulator, and the valid channels it keeps
         state = self.__dict__.copy()
-        state["_compiled"] = state.get("_compiled") is not None
+        compiled = state.pop("_compiled", None)
+        state["_compiled_valid"] = None if compiled is None else compiled.chain.valid
         return state
 
     def __setstate__(self, state: dict) -> None:
+        state = dict(state)
+        valid = state.pop("_compiled_valid", None)
         self.__dict__.update(state)
-        if self._compiled:
+        self._compiled = None
+        if valid is not None:
             self._compiled = CompiledStep.of(self)
-        else:
-            self._compiled = None
+            self._compiled.chain.valid = valid
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator],
               x0: ArrayLike | None = None) -> None:

@@ -3,12 +3,12 @@ patent)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from typing import Any, Unpack
 
 import numpy as np
-import scipy.linalg
 
 from ..models.dp_vessel import DPVesselModel
 from ..sea.processes import GaussMarkov
@@ -42,19 +42,29 @@ def _stationary_initial_state(model: DPVesselModel, spread: Mapping[str, float],
     p = model.params
     position = uniform_initial_state(model, spread, centre=setpoint)
     # stationary covariance of the WF filters: A P + P A' + E E' = 0
-    wave_cov = scipy.linalg.solve_continuous_lyapunov(p.A_w, -p.E_w @ p.E_w.T)
+    from scipy.linalg import solve_continuous_lyapunov  # (here, not at import: 0.1 s)
+
+    wave_cov = solve_continuous_lyapunov(p.A_w, -p.E_w @ p.E_w.T)
     # a square root by eigenvalues: a calm DOF (sigma_eta = 0) makes the covariance singular
     w, V = np.linalg.eigh((wave_cov + wave_cov.T) / 2)
     wave_root = V * np.sqrt(np.maximum(w, 0.0))
-    bias_std = np.asarray(p.sigma_b, dtype=float)
+    return _StationaryInitialState(position, np.asarray(p.sigma_b, dtype=float), wave_root)
 
-    def draw(rng: np.random.Generator) -> np.ndarray:
-        x = position(rng)
-        x[6:9] = bias_std * rng.standard_normal(3)
-        x[9:15] = wave_root @ rng.standard_normal(6)
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _StationaryInitialState:
+    """The LF position from ``position``; bias states of standard deviations ``bias_std``;
+    wave-frequency states ``wave_root @ n`` with ``n`` standard normal."""
+
+    position: InitialState
+    bias_std: np.ndarray
+    wave_root: np.ndarray
+
+    def __call__(self, rng: np.random.Generator) -> np.ndarray:
+        x = self.position(rng)
+        x[6:9] = self.bias_std * rng.standard_normal(3)
+        x[9:15] = self.wave_root @ rng.standard_normal(6)
         return x
-
-    return draw
 
 
 def make_dp_simulator(
@@ -149,7 +159,8 @@ class DPVesselEnv(MarineEnv):
       ``{"T_b": [500, 500, 500]}``.
     * ``setpoint``: ``{"north": m, "east": m, "psi": rad}`` (default the origin, heading north).
     * ``noise_std``, ``bias``, ``quantization``, ``sensor_range``, ``sample_period``, ``delay``,
-      ``dropout``: per channel (``north``, ``east``, ``psi``), a number or ``{channel: value}``.
+      ``dropout``: per channel (``north``, ``east``, ``psi``), a number or ``{channel: value}``;
+      None turns the stage off (:class:`~marine_envs.envs.core.SensorOptions`).
     * ``initial_spread``: ``{state: half-width}`` of the uniform initial LF state.
     * ``state_weights``, ``input_weights``: ``{name: weight}`` of the task cost.
     * ``max_offset``: drive-off distance, m (50).

@@ -153,7 +153,8 @@ class HovercraftEnv(MarineEnv):
     * ``zigzag``: None, ``"A/B"`` in degrees (``"5/5"``, ``"15/15"``, ``"25/25"``, ...) or
       ``(A, B)`` in radians: run the open-loop zig-zag test instead of the agent's actions.
     * ``noise_std``, ``bias``, ``quantization``, ``sensor_range``, ``sample_period``, ``delay``,
-      ``dropout``: per channel (``u``, ``v``, ``r``, ``psi``), a number or ``{channel: value}``.
+      ``dropout``: per channel (``u``, ``v``, ``r``, ``psi``), a number or ``{channel: value}``;
+      None turns the stage off (:class:`~marine_envs.envs.core.SensorOptions`).
     * ``initial_spread``: ``{state: half-width}`` of the uniform initial state.
     * ``state_weights``, ``input_weights``: ``{name: weight}`` of the task cost.
     * ``disturbance_seed``: if set, every episode sees the same wind.

@@ -128,7 +128,8 @@ class HydrofoilEnv(MarineEnv):
       horizontal orbital velocity (the "richer truth model" of docs/models.md 2.4; default False:
       the paper's).
     * ``noise_std``, ``bias``, ``quantization``, ``sensor_range``, ``sample_period``, ``delay``,
-      ``dropout``: per channel, a number or ``{channel: value}``.
+      ``dropout``: per channel, a number or ``{channel: value}``; None turns the stage off
+      (:class:`~marine_envs.envs.core.SensorOptions`).
     * ``initial_spread``: ``{state: half-width}``; ``state_weights``, ``input_weights``.
     * ``max_pitch``: pitch that ends the episode, rad.
     * ``disturbance_seed``: if set, every episode sees the same sea.

@@ -23,7 +23,7 @@ from numba.core import types
 from numba.experimental import structref
 
 from ..blocks import BLOCK
-from ..compiled import jit
+from ..compiled import compile_for, jit
 from ..models import VehicleModel
 from ..models.integrate import ExactStep
 from ..sensors import CompiledChain, measure_chain
@@ -281,6 +281,16 @@ class CompiledStep:
         self.stream = getattr(sim.disturbances, "stream", None)  # read by the kernel if any
         self.measured_shape = (sim.batch_size, len(sim.sensors.channels))
         self.state = self._state(sim)
+        self._compile()
+
+    def _compile(self) -> None:
+        """Compile the kernel for the arrays :meth:`step` and :meth:`measure` pass it (now, while
+        the environment is made and a first use says so: :func:`~marine_envs.compiled.first_use`;
+        not at its first step)."""
+        rows, flags, grid = np.empty((1, 1)), np.empty(1, dtype=bool), np.empty((1, 1), dtype=bool)
+        compile_for(self.kernel, self.state, rows, rows, rows, rows, rows, np.empty(1), flags,
+                    flags, True, rows, grid)
+        compile_for(measure_boats, self.state, self.chain.boats, rows, rows, grid)
 
     @classmethod
     def of(cls, sim: Any) -> CompiledStep | None:

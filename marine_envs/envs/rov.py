@@ -144,7 +144,8 @@ class ROVEnv(MarineEnv):
     * ``morph_time``: when the morph command comes, s; or None to draw it uniformly from
       ``morph_window`` (20-80 s); both None: no morph.
     * ``noise_std``, ``bias``, ``quantization``, ``sensor_range``, ``sample_period`` (control
-      steps per sample), ``delay``, ``dropout``: per channel, a number or ``{channel: value}``.
+      steps per sample), ``delay``, ``dropout``: per channel, a number or ``{channel: value}``;
+      None turns the stage off (:class:`~marine_envs.envs.core.SensorOptions`).
     * ``initial_spread``: ``{state: half-width}`` of the uniform initial state.
     * ``state_weights``, ``input_weights``: ``{name: weight}`` of the task cost.
     * ``substeps``: RK4 steps per control period (2; 1 is about 1.7x faster, with errors of

@@ -119,8 +119,9 @@ class USVEnv(MarineEnv):
     * ``noise_std``, ``bias``, ``quantization``, ``sensor_range`` (full scale),
       ``sample_period`` (control steps per sample), ``delay`` (samples), ``dropout``
       (probability):
-      a number for every channel or ``{channel: value}``, SI units; ``quantizer``: "static" or
-      "zooming" (the USV observer patent's relative law, rate ``zoom_k``).
+      a number for every channel or ``{channel: value}``, SI units; None turns the stage off
+      (:class:`~marine_envs.envs.core.SensorOptions`); ``quantizer``: "static" or "zooming"
+      (the USV observer patent's relative law, rate ``zoom_k``).
     * ``initial_spread``: ``{state: half-width}`` of the uniform initial state.
     * ``state_weights``, ``input_weights``: ``{name: weight}`` of the task cost.
     * ``max_roll``: roll angle that ends the episode, rad.

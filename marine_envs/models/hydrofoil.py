@@ -50,7 +50,6 @@ import math
 from typing import ClassVar, Literal
 
 import numpy as np
-import scipy.optimize
 
 from ..compiled import Equations, jit
 from .base import FloatArray, VehicleModel, require
@@ -327,7 +326,9 @@ class HydrofoilModel(VehicleModel):
         qS = 0.5 * p.rho * p.U**2 * p.area
         guess = np.append(p.m * p.g * share / (qS * p.lift_curve_slope) - p.theta0,
                           0.1 * p.m * p.g)
-        z, _, ok, message = scipy.optimize.fsolve(residual, guess, xtol=1e-13, full_output=True)
+        from scipy.optimize import fsolve  # (here, not at import: it takes 0.2 s)
+
+        z, _, ok, message = fsolve(residual, guess, xtol=1e-13, full_output=True)
         if ok != 1 or np.abs(residual(z)).max() > 1e-6 * p.m * p.g:
             # usually the foils stall before they carry the weight: too slow, small or heavy
             raise ValueError(f"no trim found for U={p.U!r} m/s, m={p.m!r} kg, alpha_stall="

@@ -18,7 +18,6 @@ from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from .base import FloatArray
@@ -43,6 +42,8 @@ def zoh(A: ArrayLike, B: ArrayLike, dt: float) -> tuple[FloatArray, FloatArray]:
     """Zero-order-hold discretisation ``(Phi, Gamma)`` of ``x_dot = A x + B w`` with period
     ``dt`` (s): ``Phi = exp(A dt)``, ``Gamma = int_0^dt exp(A s) ds B``, exact for ``w`` held
     over each period."""
+    import scipy.linalg  # (here, not at import: it takes 0.1 s)
+
     A, B = check_matrix("A", A), check_matrix("B", B)
     dt = check_period(dt)
     n, m = B.shape
@@ -146,6 +147,8 @@ def lqr_integral(A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike,
         action makes unstabilisable (an integrated state the inputs cannot hold away from its
         equilibrium, i.e. a transmission zero at s = 0).
     """
+    import scipy.linalg  # (here, not at import: it takes 0.1 s)
+
     A, B, Q, R = _check_design(A, B, Q, R)
     n, m = B.shape
     idx = np.asarray(integrated, dtype=int).reshape(-1)
@@ -220,6 +223,8 @@ def _check_design(A: ArrayLike, B: ArrayLike, Q: ArrayLike,
 def _solve(A: FloatArray, B: FloatArray, Q: FloatArray, R: FloatArray,
            discrete: bool, discount: float = 1.0) -> LQRSolution:
     """Solve the Riccati equation; turn scipy's failures into a ValueError that says why."""
+    import scipy.linalg  # (here, not at import: it takes 0.1 s)
+
     try:
         if discrete:
             # sum_k g^k (x'Qx + u'Ru) is the undiscounted cost of (sqrt(g) A, sqrt(g) B)

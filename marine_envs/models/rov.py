@@ -72,7 +72,6 @@ from collections.abc import Mapping, Sequence
 from typing import ClassVar
 
 import numpy as np
-import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from ..compiled import Equations, evaluate, jit, local_array, rows
@@ -346,7 +345,9 @@ class ROVModel(VehicleModel):
         M0 = mass_matrix(k, 0.0)
         dM = mass_matrix(k, 1.0) - M0
         if np.array_equal(M0, M0.T) and np.array_equal(dM, dM.T):
-            lam, V = scipy.linalg.eigh(dM, M0)  # V^T M0 V = I, V^T dM V = diag(lam)
+            from scipy.linalg import eigh  # (here, not at import: it takes 0.1 s)
+
+            lam, V = eigh(dM, M0)  # V^T M0 V = I, V^T dM V = diag(lam)
             L = V.T
         else:  # non-symmetric added mass (Yrd != Nvd or Zqd != Mwd): general eigenproblem
             lam, V = np.linalg.eig(np.linalg.solve(M0, dM))

@@ -17,8 +17,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.integrate import trapezoid
-from scipy.optimize import least_squares
 
 __all__ = [
     "MeasuredSpectrum",
@@ -153,7 +151,8 @@ def _jonswap_norm(gamma: float, sigma_a: float, sigma_b: float) -> float:
     # u = 1 (the kink in sigma) is a node of both halves.
     u = np.concatenate([np.linspace(lo, 1.0, 4001), np.linspace(1.0, hi, 4001)[1:]])
     p = u**-5 * np.exp(-1.25 * u**-4)
-    return 1.0 + 5.0 * float(trapezoid(p * (_peak_enhancement(u, gamma, sigma_a, sigma_b) - 1), u))
+    excess = _peak_enhancement(u, gamma, sigma_a, sigma_b) - 1
+    return 1.0 + 5.0 * float(np.trapezoid(p * excess, u))
 
 
 def jonswap(
@@ -206,7 +205,7 @@ def spectral_moment(omega: ArrayLike, S: ArrayLike, n: float = 0) -> float:
     if not math.isfinite(order):
         raise ValueError(f"n={n!r} is invalid: must be finite")
     w, s = _spectrum_arrays("omega", omega, "S", S, allow_zero=order >= 0)
-    return float(trapezoid(w**order * s, w))
+    return float(np.trapezoid(w**order * s, w))
 
 
 def significant_wave_height(omega: ArrayLike, S: ArrayLike) -> float:
@@ -459,6 +458,8 @@ def _model(kind: str, omega: np.ndarray, params: np.ndarray) -> np.ndarray:
 
 def _least_squares(kind: str, w: np.ndarray, s: np.ndarray, x0: np.ndarray) -> np.ndarray:
     """Fit on the linear density scaled by its maximum, so the peak dominates the cost."""
+    from scipy.optimize import least_squares  # (here, not at import: it takes 0.2 s)
+
     scale = float(s.max())
 
     def residual(p: np.ndarray) -> np.ndarray:
