@@ -209,9 +209,11 @@ def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
         if stop.signal is not None and out.rows < 2:
             stop.pass_on()  # nothing worth keeping: the signal acts as if it was never caught
         out.meta.update(run.metadata())
+    channels = run.sim.sensors.channels
     return Recorded(Path(path), model.name, out.rows, steps, out.last_time, run.stopped,
-                    stop.signal, tuple(model.input_names), tuple(run.sim.sensors.channels),
-                    tuple(disturbances))
+                    stop.signal, tuple(model.input_names),
+                    tuple(name for name in model.output_names if name in channels),
+                    tuple(name for name in model.disturbance_names if name in disturbances))
 
 
 class _signals_stop:  # noqa: N801  (used as a context manager, like contextlib's)

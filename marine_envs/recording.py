@@ -70,6 +70,8 @@ import contextlib
 import importlib.util
 import json
 import math
+import os
+import re
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import InitVar, dataclass, field
 from pathlib import Path
@@ -492,7 +494,8 @@ class RecordingStream:
             self._parquet.add_key_value_metadata(
                 {**self._pandas, METADATA_KEY: json.dumps(self._metadata(),
                                                           default=_json_default)})
-            self._parquet.close()
+            with _arrow_errors():
+                self._parquet.close()
 
     def _metadata(self) -> dict[str, Any]:
         _check_meta(self.meta)
@@ -528,10 +531,25 @@ class RecordingStream:
             return
         pa, pq = _pyarrow()
         table = pa.Table.from_pandas(frame, preserve_index=False)
-        if self._parquet is None:
-            self._pandas = table.schema.metadata or {}  # pandas' own, kept next to ours
-            self._parquet = pq.ParquetWriter(self._path, table.schema, store_schema=False)
-        self._parquet.write_table(table)
+        with _arrow_errors():
+            if self._parquet is None:
+                self._pandas = table.schema.metadata or {}  # pandas' own, kept next to ours
+                self._parquet = pq.ParquetWriter(self._path, table.schema, store_schema=False)
+            self._parquet.write_table(table)
+
+
+@contextlib.contextmanager
+def _arrow_errors() -> Iterator[None]:
+    """pyarrow's I/O errors as Python's own: its OSError has the errno only in its text
+    (``... [errno 28] No space left on device``), so the message would not be the usual one."""
+    try:
+        yield
+    except OSError as error:
+        found = re.search(r"\[errno (\d+)\]", str(error))
+        if found is None:
+            raise
+        number = int(found[1])
+        raise OSError(number, os.strerror(number)) from error
 
 
 def _json_default(value: Any) -> Any:
