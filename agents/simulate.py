@@ -98,7 +98,7 @@ class _Run:
         self.meta = {"env": env_id, "seed": seed, "policy": policy,
                      "policy_options": dict(policy_options), "dt": sim.dt,
                      "env_kwargs": dict(env_kwargs or {}), "steps_requested": steps}
-        self.taken, self.terminated = 0, False
+        self.terminated = False
         self.stopped = "not started"
 
     def rows(self, progress: bool = False) -> Iterator[np.ndarray]:
@@ -114,7 +114,6 @@ class _Run:
                                                 deterministic=True)
                 seen, time = obs, info["time"]
                 obs, _, terminated, truncated, info = env.step(action)
-                self.taken = k + 1
                 if bar is not None:
                     bar.update()
                 yield np.concatenate(([time], info["action_applied"],
@@ -197,7 +196,7 @@ def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
     """
     run = _Run(env_id, steps, seed, policy, env_kwargs, disturbances, policy_options)
     model = run.sim.model
-    with _signals_stop() as stop, stream_recording(path, model.name, run.columns, run.params,
+    with _StopOnSignals() as stop, stream_recording(path, model.name, run.columns, run.params,
                                                    run.meta, chunk_rows) as out, \
             contextlib.closing(run.rows(progress)) as rows:  # closed (its bar too) on a break
         for row in rows:
@@ -216,7 +215,7 @@ def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
                     tuple(name for name in model.disturbance_names if name in disturbances))
 
 
-class _signals_stop:  # noqa: N801  (used as a context manager, like contextlib's)
+class _StopOnSignals:
     """Within the block, SIGINT and SIGTERM stop a run at its next step instead of raising in
     the middle of one (a row or a chunk written half-way): :attr:`signal` is set to the one
     received. Outside the main thread (where signals cannot be caught) nothing changes."""
@@ -227,7 +226,7 @@ class _signals_stop:  # noqa: N801  (used as a context manager, like contextlib'
         self.signal: int | None = None
         self._before: dict[int, Any] = {}
 
-    def __enter__(self) -> _signals_stop:
+    def __enter__(self) -> _StopOnSignals:
         if threading.current_thread() is threading.main_thread():
             for number in self.CAUGHT:
                 self._before[number] = signal.signal(number, self._receive)

@@ -462,14 +462,14 @@ class RecordingStream:
         for start in range(0, len(rows), len(self._buffer)):
             block = rows[start:start + len(self._buffer)]
             self.rows += len(block)
-            self._write(block)
+            self._write(block[:, self._order])
 
     @contextlib.contextmanager
     def open(self, path: Path, csv: bool) -> Iterator[None]:
         """The data file ``path`` open for the rows (closed whatever happens)."""
         self._path, self._csv = path, csv
         if csv:
-            self._file = open(path, "w", newline="", encoding="utf-8")  # noqa: SIM115
+            self._file = open(path, "w", newline="", encoding="utf-8")
             pd.DataFrame(columns=self.columns).to_csv(self._file, index=False)
         try:
             yield
@@ -505,9 +505,8 @@ class RecordingStream:
 
     def _flush(self) -> None:
         if self._pending:
-            block, self._pending = self._buffer[:self._pending], 0
-            self._write(block[:, self._order] if self._order != list(range(len(self._order)))
-                        else block.copy())
+            block, self._pending = self._buffer[:self._pending, self._order], 0  # a copy
+            self._write(block)
 
     def _write(self, block: np.ndarray) -> None:
         """Check ``block`` (rows in the file's column order) and append it to the file."""
