@@ -976,6 +976,7 @@ COMMAND_LINE_HINTS = {
     "pass model=... to read the file as SI units with nominal parameters":
         "give --model to read the file as SI units with nominal parameters",
     "pass model=...": "give --model",
+    "use method='free' (or 'auto')": "use --method free (or auto)",
 }
 
 

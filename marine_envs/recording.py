@@ -62,6 +62,10 @@ beyond 2 pi: most often a unit mistake) are kept, and listed in :attr:`Recording
 the likely mistake; :func:`read_recording` also issues them as
 :class:`~marine_envs.plausibility.PlausibilityWarning`.
 Parquet support needs pyarrow: ``pip install "marine-envs[parquet]"``.
+
+Writing (:func:`write_recording`, or :func:`stream_recording` for a recording made row by row,
+in bounded memory) is whole or nothing: a full disk or an error leaves the earlier file and its
+sidecar as they were, never a truncated table or a sidecar that does not match it.
 """
 
 from __future__ import annotations
@@ -821,4 +825,5 @@ def _si_units(vehicle: VehicleModel) -> dict[str, str]:
             **dict(zip(vehicle.output_names, vehicle.output_units, strict=True))}
 
 
-__all__ = ["METADATA_KEY", "UNIT_CONVERSIONS", "Recording", "read_recording", "write_recording"]
+__all__ = ["METADATA_KEY", "UNIT_CONVERSIONS", "Recording", "RecordingStream", "read_recording",
+           "stream_recording", "write_recording"]

@@ -142,6 +142,9 @@ FAULTS = [
           "resample the record to a uniform time step", not_said="require_uniform"),
     Fault("diagnose a CSV without sidecar", "diagnose {w}/no_sidecar.csv",
           "give --model", not_said="model=..."),
+    Fault("diagnose a series by innovations",
+          "diagnose {w}/run.csv {w}/run.csv --quiet --method innovations",
+          "use --method free (or auto)", not_said="method='free'"),
 ]
 
 
