@@ -664,6 +664,10 @@ def _bench(args: argparse.Namespace) -> int:
     return 0
 
 
+#: ``marine train``'s algorithms and backends: agents.sb3's ALGOS and BACKENDS, named here so
+#: that the parser (``--help``, ``--version``, any command) does not import torch.
+TRAIN_ALGOS = ("ppo", "sac", "td3", "a2c", "ppo_lstm")
+TRAIN_BACKENDS = ("native", "dummy")
 GRID_OPTIONS = ("vehicles", "estimators", "controllers", "seas", "sensors", "seeds", "seconds",
                 "timesteps")
 DEMO_PLOT = "marine_demo.png"
@@ -837,8 +841,6 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose.add_argument("--quiet", action="store_true", help="no progress bar")
     diagnose.set_defaults(run=_diagnose)
 
-    from .sb3 import ALGOS, BACKENDS
-
     train = commands.add_parser(
         "train", help="train a Stable-Baselines3 agent (PPO, SAC, TD3, A2C) on an environment",
         description="Train an SB3 agent on the native batched environment, optionally behind "
@@ -852,7 +854,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "--resume DIR continues from the last saved agent with its step count.")
     train.add_argument("env_id", nargs="?", type=env_id,
                        help="environment id, e.g. marine_envs/USV-v0 (or USV-v0)")
-    train.add_argument("--algo", choices=tuple(ALGOS),
+    train.add_argument("--algo", choices=TRAIN_ALGOS,
                        help="ppo, sac, td3, a2c or ppo_lstm (sb3-contrib's RecurrentPPO: the "
                             "recurrent extra); default ppo")
     train.add_argument("--estimator", choices=registry.names(), metavar="ESTIMATOR",
@@ -863,7 +865,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "--resume: the total to reach, default the run's own)")
     train.add_argument("--n-envs", type=positive_int,
                        help="boats stepped together (default: the YAML's)")
-    train.add_argument("--backend", choices=BACKENDS,
+    train.add_argument("--backend", choices=TRAIN_BACKENDS,
                        help="native (our batched env, the default) or dummy (SB3's "
                             "DummyVecEnv)")
     train.add_argument("--seed", type=seed_int, help="seed (default 0)")

@@ -175,3 +175,10 @@ def test_a_streamed_recording_equals_the_one_made_in_memory(tmp_path, suffix):
     episode = run_episode(run.env, run.policy, 60, seed=5)
     np.testing.assert_array_equal(streamed.inputs, episode.inputs)
     np.testing.assert_array_equal(streamed.time, episode.time)
+
+
+def test_the_parser_names_the_algorithms_and_backends_of_sb3_without_importing_it():
+    from agents import sb3
+    from agents.cli import TRAIN_ALGOS, TRAIN_BACKENDS
+
+    assert TRAIN_ALGOS == tuple(sb3.ALGOS) and TRAIN_BACKENDS == sb3.BACKENDS

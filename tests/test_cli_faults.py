@@ -103,7 +103,7 @@ class Fault:
     not_said: str | None = None
 
 
-#: What an earlier run left: a recording (with its sidecar), a figure, a report.
+#: An earlier recording and its sidecar ("workspace": the workspace's file of that name).
 EARLIER_RUN = {"run.csv": "workspace", "run.csv.json": "workspace"}
 FAULTS = [
     # a full disk: /dev/full where the output may be a device
