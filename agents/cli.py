@@ -5,9 +5,20 @@ Every command checks what it is given (environment ids, numbers, input files, ou
 the extras their formats need) before any work, and reports a mistake as one line
 ``marine CMD: error: ...`` with exit code 2, never a traceback (``marine --debug CMD ...``
 shows it). An output that exists is refused unless ``--force``; forced, what the command wrote
-there before (checkpoints, figures) is cleared first, so that two runs never mix. Ctrl-C stops
-a command with exit code 130 (128 + SIGINT); ``marine train`` first saves the agent
-(``marine train --resume DIR`` continues it).
+there before (checkpoints, figures) is cleared first, so that two runs never mix; two outputs of
+one command on the same path are refused.
+
+Nothing is lost: every file is written whole or not at all (a temporary file beside it, renamed
+over it at the end: :mod:`marine_envs.files`), so a full disk or an error leaves the earlier file
+(or none), and a report folder is filled only once all of it is written. A file that cannot be
+written or read is reported like a mistake, one line and exit code 2:
+``marine CMD: error: cannot write PATH: No space left on device``.
+
+Exit codes: 0 done; 2 a mistake in what was asked, or a file that cannot be read or written;
+130 (128 + SIGINT) stopped by Ctrl-C, 143 (128 + SIGTERM) by SIGTERM, which every command takes
+as Ctrl-C: ``marine train`` first saves the agent (``marine train --resume DIR`` continues it),
+``marine simulate`` keeps the steps recorded so far; 141 (128 + SIGPIPE) when the reader of the
+output went away (``marine envs | head -1``), silently.
 """
 
 from __future__ import annotations
@@ -20,7 +31,9 @@ import json
 import math
 import os
 import shutil
+import signal
 import sys
+import threading
 import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -106,6 +119,8 @@ the others, each with marine-envs installed), then run on any of them:
 # -- checks before any work ---------------------------------------------------------------------
 #: Exit codes: a user mistake (argparse's own), and Ctrl-C (128 + SIGINT, the shell's convention).
 EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
+#: A signal stopped the command: this plus the signal's number (the shell's convention).
+EXIT_SIGNAL = 128
 #: Exceptions that report a mistake in what was asked (a value, a file, a missing extra), not a
 #: bug: one line, exit 2. Anything else keeps its traceback.
 USER_ERRORS = (ValueError, OSError, ImportError)
@@ -185,6 +200,8 @@ def _output_file(path: str | None, force: bool, option: str,
     if path is None:
         return None
     out = Path(path)
+    if out.exists() and not (out.is_file() or out.is_dir()):
+        return out  # a device or a pipe (/dev/stdout): written through, never replaced
     if suffixes is not None and out.suffix.lower() not in suffixes:
         raise ValueError(f"{option} {path}: unknown format {out.suffix or '(no suffix)'!r}: "
                          f"one of {', '.join(suffixes)}")
@@ -257,9 +274,28 @@ def _plot_path(path: str | None, force: bool, option: str = "--plot") -> Path | 
     return _output_file(path, force, option, PLOT_SUFFIXES)
 
 
+def _distinct(*outputs: tuple[str, Path | None]) -> None:
+    """Refuse two outputs of one command on the same file (the second would overwrite the
+    first): ``outputs`` are ``(option, path)``; devices and pipes are shared freely.
+
+    :raises ValueError: naming both options.
+    """
+    seen: dict[str, str] = {}
+    for option, path in outputs:
+        if path is None or (path.exists() and not path.is_file()):
+            continue
+        key = os.path.realpath(path)
+        if key in seen and seen[key] != option:
+            raise ValueError(f"{seen[key]} and {option} name the same file {path}: give each "
+                             "its own")
+        seen.setdefault(key, option)
+
+
 def _write_json(path: Path | None, document: Any) -> None:
+    from marine_envs.files import write_json
+
     if path is not None:
-        path.write_text(json.dumps(document, indent=2, default=float) + "\n")
+        write_json(path, document, default=float)
 
 
 @contextlib.contextmanager
@@ -285,6 +321,7 @@ def _demo(args: argparse.Namespace) -> int:
     if not args.no_plot:  # the demo's own figure is rewritten; a path the user names is kept
         plot = _plot_path(args.plot, args.force) if args.plot else _plot_path(DEMO_PLOT, True)
     out = _output_file(args.json, args.force, "--json")
+    _distinct(("--plot", plot), ("--json", out))
     summary = run_demo(seconds=args.seconds, seed=args.seed, hs=args.hs, plot=plot)
     print(f"USV-v0, Hs = {args.hs} m, stern-quartering sea, {args.seconds:g} s, seed {args.seed}")
     print(format_table(summary))
@@ -297,9 +334,9 @@ def _demo(args: argparse.Namespace) -> int:
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from marine_envs.recording import check_suffix, sidecar, write_recording
+    from marine_envs.recording import check_suffix, sidecar
 
-    from .simulate import simulate
+    from .simulate import record
 
     out = check_suffix(args.out)  # and Parquet's pyarrow
     _output_file(args.out, args.force, "--out",
@@ -309,16 +346,16 @@ def _simulate(args: argparse.Namespace) -> int:
     options = {k: v for k, v in (("amplitude", args.amplitude), ("period", args.period),
                                  ("hold", args.hold)) if v is not None}
     disturbances = [n.strip() for n in args.disturbances.split(",") if n.strip()]
-    recording = simulate(args.env, args.steps, seed=args.seed, policy=args.policy,
-                         env_kwargs=env_kwargs, progress=not args.quiet,
-                         disturbances=disturbances, **options)
-    path = write_recording(recording, out)
-    print(f"wrote {len(recording.time)} samples ({recording.time[-1]:.1f} s) of model "
-          f"{recording.model!r}: inputs {', '.join(recording.input_names)}; channels "
-          f"{', '.join(recording.measured_names)}"
-          + (f"; disturbances {', '.join(recording.disturbance_names)}"
-             if recording.disturbance_names else "") + f" -> {path}")
-    return 0
+    done = record(out, args.env, args.steps, seed=args.seed, policy=args.policy,
+                  env_kwargs=env_kwargs, progress=not args.quiet, disturbances=disturbances,
+                  **options)
+    kept = f": kept {done.steps} steps in {done.path}" if done.signal is not None else ""
+    print(f"marine simulate: {done.stopped}{kept}", file=sys.stderr)
+    print(f"wrote {done.steps} samples ({done.seconds:.1f} s) of model {done.model!r}: inputs "
+          f"{', '.join(done.input_names)}; channels {', '.join(done.measured_names)}"
+          + (f"; disturbances {', '.join(done.disturbance_names)}"
+             if done.disturbance_names else "") + f" -> {done.path}")
+    return 0 if done.signal is None else EXIT_SIGNAL + done.signal
 
 
 def _episode(args: argparse.Namespace) -> int:
@@ -326,6 +363,7 @@ def _episode(args: argparse.Namespace) -> int:
 
     plot = _plot_path(args.plot, args.force)
     out = _output_file(args.json, args.force, "--json")
+    _distinct(("--plot", plot), ("--json", out))
     _check_estimator(args.estimator)
     env_kwargs = args.env_kwargs or {}
     _check_env(args.env, env_kwargs)
@@ -346,6 +384,7 @@ def _reproduce(args: argparse.Namespace) -> int:
 
     plot = _plot_path(args.plot, args.force)
     out = _output_file(args.json, args.force, "--json")
+    _distinct(("--plot", plot), ("--json", out))
     result = run(args.name, quick=args.quick, progress=not args.quiet)
     print(result.text)
     if plot is not None:
@@ -396,12 +435,15 @@ def _read_recordings(args: argparse.Namespace) -> list[Any]:
 def _diagnose(args: argparse.Namespace) -> int:
     from estimators.diagnosis import diagnose
     from estimators.diagnosis.api import expected_seconds, read_params
-    from estimators.diagnosis.report import owned_files
+    from estimators.diagnosis.report import OWNED, owned_files
 
     out = _output_file(args.json, args.force, "--json")
     report = None if args.report is None else _output_dir(
         args.report, args.force, "--report", lambda d: [p.name for p in owned_files(d)],
         " (an earlier report)")
+    if report is not None:
+        _distinct(("--json", out), *(("--report", report / name) for name in OWNED
+                                     if "*" not in name))
     params = read_params(args.params) if args.params else None
     recordings = _read_recordings(args)  # warnings of implausible units are printed here
     if args.calibrate:
@@ -442,8 +484,7 @@ def _diagnose(args: argparse.Namespace) -> int:
     if report is not None:
         from estimators.diagnosis.report import write_report
 
-        for stale in owned_files(report):  # --force: no figure of an earlier run stays
-            stale.unlink()
+        # replaces the earlier report (--force) as a whole once the new one is written
         path = write_report(diagnosis, report, ", ".join(Path(r).name for r in args.recording))
         print(f"report written to {path}")
     return 0
@@ -589,6 +630,8 @@ def _bench(args: argparse.Namespace) -> int:
     report = None if args.report is None else _output_dir(
         args.report, args.force or own(args.report), "--report",
         lambda d: ["index.html"] if (d / "index.html").exists() else [])
+    _distinct(("--json", json_out), *(("--out", out / name) for name in BENCH_OWNED),
+              ("--report", None if report is None else report / "index.html"))
     if resuming:
         before = json.loads((out / "grid.json").read_text())
         if before != json.loads(json.dumps(grid.settings())):
@@ -611,9 +654,11 @@ def _bench(args: argparse.Namespace) -> int:
     if report is not None:
         written.append(write_report(rows, out, report, grid))
     if json_out is not None:
+        from marine_envs.files import write_json
+
         records = json.loads(rows.to_json(orient="records"))
         json_out.parent.mkdir(parents=True, exist_ok=True)  # inside --out: made with it
-        json_out.write_text(json.dumps({"rows": records}, indent=1) + "\n")
+        write_json(json_out, {"rows": records}, indent=1)
         written.append(json_out)
     print("wrote " + ", ".join(map(str, written)))
     return 0
@@ -636,6 +681,9 @@ def build_parser() -> argparse.ArgumentParser:
                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--debug", action="store_true",
                         help="show the traceback of an error (for a bug report)")
+    from marine_envs import __version__
+
+    parser.add_argument("--version", action="version", version=f"marine-envs {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     demo = commands.add_parser(
@@ -920,22 +968,77 @@ def _warnings_as_lines(command: str) -> Iterator[None]:
         warnings.showwarning = show
 
 
+#: Hints in the library's messages that name a Python argument, and what a command-line user
+#: does instead.
+COMMAND_LINE_HINTS = {
+    "pass require_uniform=False to accept non-uniform sampling":
+        "resample the record to a uniform time step (its median step, say) first",
+    "pass model=... to read the file as SI units with nominal parameters":
+        "give --model to read the file as SI units with nominal parameters",
+    "pass model=...": "give --model",
+    "use method='free' (or 'auto')": "use --method free (or auto)",
+}
+
+
 def _one_line(error: BaseException) -> str:
-    return "; ".join(part.strip() for part in str(error).splitlines() if part.strip()) \
+    text = "; ".join(part.strip() for part in str(error).splitlines() if part.strip()) \
         or type(error).__name__
+    for python, command_line in COMMAND_LINE_HINTS.items():
+        text = text.replace(python, command_line)
+    return text
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a batch system's time limit), raised where the program is, as Ctrl-C
+    raises :class:`KeyboardInterrupt`: every command stops (and saves) the same way for both."""
+
+
+@contextlib.contextmanager
+def _sigterm_as_interrupt() -> Iterator[None]:
+    """Within the block, SIGTERM raises :class:`Terminated` (signals are caught only in the
+    main thread: elsewhere nothing changes)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(number: int, frame: Any) -> NoReturn:
+        raise Terminated
+
+    before = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, before)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``marine`` with ``argv`` (default: the command line); the exit code: 0, 2 for a
-    mistake in what was asked (one line on stderr), 130 when Ctrl-C stopped it."""
+    """Run ``marine`` with ``argv`` (default: the command line); the exit code (see the module's
+    docstring): 0, 2 for a mistake in what was asked (one line on stderr), 128 + the signal's
+    number when a signal stopped it."""
+    try:
+        try:
+            return _main(argv)
+        finally:
+            sys.stdout.flush()  # a reader that went away shows here, not at the exit
+    except BrokenPipeError:
+        # Python's recipe (the signal module's docs): what is left goes nowhere, no message
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_SIGNAL + signal.SIGPIPE
+
+
+def _main(argv: Sequence[str] | None) -> int:
     args = build_parser().parse_args(argv)
     command = f"marine {args.command}"
     try:
-        with _warnings_as_lines(command):
+        with _warnings_as_lines(command), _sigterm_as_interrupt():
             return args.run(args)
-    except KeyboardInterrupt:
-        print(f"{command}: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as error:
+        terminated = isinstance(error, Terminated)
+        print(f"{command}: {'terminated' if terminated else 'interrupted'}", file=sys.stderr)
+        return EXIT_SIGNAL + (signal.SIGTERM if terminated else signal.SIGINT)
+    except BrokenPipeError:
+        raise
     except USER_ERRORS as error:
         if args.debug:
             raise

@@ -9,6 +9,7 @@ import gymnasium as gym
 import numpy as np
 
 import marine_envs  # noqa: F401  (registers the environments)
+from marine_envs.provenance import save_figure
 
 from .evaluation import Episode, run_episode
 from .excitation import Zero
@@ -70,7 +71,7 @@ def _plot(episodes: dict[str, Episode], path: Path) -> None:
     fig.suptitle("USV-v0: course keeping and roll damping in a stern-quartering sea")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 

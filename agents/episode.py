@@ -12,6 +12,7 @@ import numpy as np
 
 import marine_envs  # noqa: F401  (registers the environments)
 from estimators import registry
+from marine_envs.provenance import save_figure
 
 from .evaluation import Episode, episode_metrics, run_episode
 from .lqr import LQRPolicy
@@ -134,5 +135,5 @@ def plot_episode(episode: Episode, sim: Any, title: str, path: Path,
     fig.suptitle(title)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)

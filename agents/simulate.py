@@ -1,17 +1,24 @@
-"""``marine simulate``: record an episode of any environment in the recording format."""
+"""``marine simulate``: record an episode of any environment in the recording format, in
+memory (:func:`simulate`) or streamed to a file as it runs (:func:`record`)."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
-from collections.abc import Mapping, Sequence
+import math
+import signal
+import threading
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
+import pandas as pd
 
 import marine_envs  # noqa: F401  (registers the environments)
-from marine_envs.recording import Recording
+from marine_envs.recording import CHUNK_ROWS, Recording, stream_recording
 
-from .evaluation import run_episode
 from .excitation import SIGNALS, Dithered, RandomSteps
 from .lqr import LQRPolicy
 
@@ -49,33 +56,195 @@ def make_policy(name: str, env: Any, seed: int | None, **options: float) -> Any:
     return signal
 
 
+@dataclasses.dataclass
+class Recorded:
+    """What :func:`record` wrote: ``steps`` rows of ``requested`` into ``path``."""
+
+    path: Path
+    model: str
+    steps: int
+    requested: int
+    seconds: float
+    #: Why the run stopped, a phrase (also in the recording's metadata as ``stopped``).
+    stopped: str
+    #: The signal (``signal.SIGINT`` or ``SIGTERM``) that stopped it, or None.
+    signal: int | None
+    input_names: tuple[str, ...]
+    measured_names: tuple[str, ...]
+    disturbance_names: tuple[str, ...]
+
+
+class _Run:
+    """One simulation of :func:`simulate` and :func:`record`: the environment and policy,
+    checked before any step, and the rows of the recording step by step."""
+
+    def __init__(self, env_id: str, steps: int, seed: int | None, policy: str,
+                 env_kwargs: Mapping[str, Any] | None, disturbances: Sequence[str],
+                 policy_options: Mapping[str, float]) -> None:
+        if steps < 2:
+            raise ValueError(f"steps={steps!r} is invalid: a recording needs at least 2 steps")
+        self.env = gym.make(env_id, max_episode_steps=steps, **dict(env_kwargs or {}))
+        sim = self.sim = self.env.unwrapped.sim
+        names = sim.model.disturbance_names
+        unknown = sorted(set(disturbances) - set(names))
+        if unknown:
+            raise ValueError(f"unknown disturbance(s) {unknown} of {env_id}: choose from "
+                             f"{', '.join(names) or 'none'}")
+        self.policy = make_policy(policy, self.env, seed, **policy_options)
+        self.steps, self.seed = steps, seed
+        self._recorded = [names.index(name) for name in disturbances]
+        self.columns = ["time", *sim.model.input_names, *disturbances, *sim.sensors.channels]
+        self.params = dataclasses.asdict(sim.model.params)
+        self.meta = {"env": env_id, "seed": seed, "policy": policy,
+                     "policy_options": dict(policy_options), "dt": sim.dt,
+                     "env_kwargs": dict(env_kwargs or {}), "steps_requested": steps}
+        self.terminated = False
+        self.stopped = "not started"
+
+    def rows(self, progress: bool = False) -> Iterator[np.ndarray]:
+        """Each step's row (time, applied inputs, recorded disturbances, sensor outputs: what
+        the policy saw before it acted), until the episode ends; :attr:`stopped` then says
+        why (a consumer that stops early says so itself)."""
+        env = self.env
+        obs, info = env.reset(seed=self.seed)
+        with _bar(self.steps, progress) as bar:
+            for k in range(self.steps):
+                # SB3's convention: episode_start resets a stateful policy (LQR's integrators)
+                action, _ = self.policy.predict(obs, episode_start=np.array([k == 0]),
+                                                deterministic=True)
+                seen, time = obs, info["time"]
+                obs, _, terminated, truncated, info = env.step(action)
+                if bar is not None:
+                    bar.update()
+                yield np.concatenate(([time], info["action_applied"],
+                                      info["disturbance"][self._recorded], seen))
+                if terminated:
+                    self.terminated = True
+                    self.stopped = (f"the episode terminated at step {k + 1} of {self.steps}: "
+                                    f"{why_terminated(self.sim)}")
+                    return
+                if truncated and k + 1 < self.steps:
+                    self.stopped = (f"the environment truncated the episode at step {k + 1} "
+                                    f"of {self.steps}")
+                    return
+        self.stopped = f"the requested {self.steps} steps were reached"
+
+    def metadata(self) -> dict[str, Any]:
+        return {**self.meta, "terminated": self.terminated, "stopped": self.stopped}
+
+
+def why_terminated(sim: Any) -> str:
+    """Which state of ``sim``'s first boat left the task's limits (angles in degrees)."""
+    model, task, x = sim.model, sim.task, sim.x[0]
+    for i, name in enumerate(model.state_names):
+        if not np.isfinite(x[i]):
+            return f"{name} is not finite"
+        if task.low[i] <= x[i] <= task.high[i]:
+            continue
+        unit = model.state_units[i]
+        scale = 180 / math.pi if unit.startswith("rad") else 1.0
+        unit = unit.replace("rad", "deg")
+        return (f"{name} = {x[i] * scale:.4g} {unit} left its limits [{task.low[i] * scale:.4g}, "
+                f"{task.high[i] * scale:.4g}] {unit}")
+    return "the environment ended it"
+
+
+@contextlib.contextmanager
+def _bar(total: int, show: bool) -> Iterator[Any]:
+    if not show:
+        yield None
+        return
+    from tqdm import tqdm
+
+    # counted by hand: a bar over range(steps) left by the last step's break ends one short
+    with tqdm(total=total, desc="simulating", unit="step") as bar:
+        yield bar
+
+
 def simulate(env_id: str, steps: int, seed: int | None = None, policy: str = "prbs",
              env_kwargs: Mapping[str, Any] | None = None, progress: bool = False,
              disturbances: Sequence[str] = (), **policy_options: float) -> Recording:
     """Record ``steps`` steps of ``env_id`` under ``policy``: the applied inputs and the sensor
-    outputs, in SI units, with the model name, its parameters and the settings as metadata.
+    outputs, in SI units, with the model name, its parameters and the settings as metadata
+    (``stopped`` says why the run ended: the steps reached, or the episode terminated and
+    why). In memory: :func:`record` writes a long run to a file as it goes.
 
     :param disturbances: the model's disturbance channels to record too, exact (a logged
         command such as the ROV's morph ``s_cmd``, or an ideal wind or current sensor).
     :raises ValueError: ``steps < 2`` or an unknown disturbance name, before any simulation.
     """
-    if steps < 2:
-        raise ValueError(f"steps={steps!r} is invalid: a recording needs at least 2 steps")
-    env = gym.make(env_id, max_episode_steps=steps, **dict(env_kwargs or {}))
-    names = env.unwrapped.sim.model.disturbance_names
-    unknown = sorted(set(disturbances) - set(names))
-    if unknown:
-        raise ValueError(f"unknown disturbance(s) {unknown} of {env_id}: choose from "
-                         f"{', '.join(names) or 'none'}")
-    episode = run_episode(env, make_policy(policy, env, seed, **policy_options), steps,
-                          seed=seed, progress=progress)
-    sim = env.unwrapped.sim
-    measurements = {name: episode.observations[:, i]
-                    for i, name in enumerate(sim.sensors.channels)}
-    params = dataclasses.asdict(sim.model.params)
-    meta = {"env": env_id, "seed": seed, "policy": policy,
-            "policy_options": dict(policy_options), "dt": sim.dt,
-            "env_kwargs": dict(env_kwargs or {}), "terminated": episode.terminated}
-    recorded = {name: episode.disturbances[:, names.index(name)] for name in disturbances}
-    return Recording.from_arrays(sim.model.name, episode.time, episode.inputs, measurements,
-                                 params=params, meta=meta, disturbances=recorded)
+    run = _Run(env_id, steps, seed, policy, env_kwargs, disturbances, policy_options)
+    rows = np.array(list(run.rows(progress)))
+    data = pd.DataFrame(rows, columns=run.columns)
+    return Recording(data, run.sim.model.name, run.params, run.metadata())
+
+
+def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
+           policy: str = "prbs", env_kwargs: Mapping[str, Any] | None = None,
+           progress: bool = False, disturbances: Sequence[str] = (),
+           chunk_rows: int = CHUNK_ROWS, **policy_options: float) -> Recorded:
+    """:func:`simulate` into the recording file ``path`` (.csv with its sidecar, or .parquet)
+    as it runs, ``chunk_rows`` rows at a time, so that memory stays bounded however long the
+    run. The file appears whole at the end (:func:`~marine_envs.recording.stream_recording`).
+    SIGINT (Ctrl-C) or SIGTERM stops the run after the step under way and keeps the rows
+    recorded so far, a valid recording whose metadata says so; :attr:`Recorded.signal` tells
+    which signal, and one that comes before two rows exist is passed on as if not caught.
+
+    :raises ValueError: as :func:`simulate`, before any simulation.
+    :raises marine_envs.files.WriteError: the file cannot be written (names it); the earlier
+        file, if any, is left as it was.
+    """
+    run = _Run(env_id, steps, seed, policy, env_kwargs, disturbances, policy_options)
+    model = run.sim.model
+    with _StopOnSignals() as stop, stream_recording(path, model.name, run.columns, run.params,
+                                                   run.meta, chunk_rows) as out, \
+            contextlib.closing(run.rows(progress)) as rows:  # closed (its bar too) on a break
+        for row in rows:
+            out.append(row)
+            if stop.signal is not None:
+                run.stopped = (f"interrupted by {signal.Signals(stop.signal).name} after "
+                               f"{out.rows} of {steps} steps")
+                break
+        if stop.signal is not None and out.rows < 2:
+            stop.pass_on()  # nothing worth keeping: the signal acts as if it was never caught
+        out.meta.update(run.metadata())
+    channels = run.sim.sensors.channels
+    return Recorded(Path(path), model.name, out.rows, steps, out.last_time, run.stopped,
+                    stop.signal, tuple(model.input_names),
+                    tuple(name for name in model.output_names if name in channels),
+                    tuple(name for name in model.disturbance_names if name in disturbances))
+
+
+class _StopOnSignals:
+    """Within the block, SIGINT and SIGTERM stop a run at its next step instead of raising in
+    the middle of one (a row or a chunk written half-way): :attr:`signal` is set to the one
+    received. Outside the main thread (where signals cannot be caught) nothing changes."""
+
+    CAUGHT = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.signal: int | None = None
+        self._before: dict[int, Any] = {}
+
+    def __enter__(self) -> _StopOnSignals:
+        if threading.current_thread() is threading.main_thread():
+            for number in self.CAUGHT:
+                self._before[number] = signal.signal(number, self._receive)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._restore()
+
+    def _receive(self, number: int, frame: Any) -> None:
+        self.signal = number
+
+    def _restore(self) -> None:
+        for number, handler in self._before.items():
+            signal.signal(number, handler)
+        self._before.clear()
+
+    def pass_on(self) -> None:
+        """Deliver the signal received to the handlers there were before the block."""
+        self._restore()
+        if self.signal is not None:
+            signal.raise_signal(self.signal)

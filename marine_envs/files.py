@@ -13,6 +13,7 @@ import contextlib
 import errno
 import json
 import os
+import stat
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -51,6 +52,7 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".part{target.suffix}",
                                     dir=target.parent)
         os.close(fd)
+        os.chmod(name, _mode(target))  # mkstemp's 0600 would hide the file from others
     except OSError as error:
         raise _write_error(target, error) from error
     temporary = Path(name)
@@ -58,6 +60,9 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         yield temporary
         _fsync(temporary)
         os.replace(temporary, target)
+    except WriteError:  # a file written inside this one's writer names itself: keep its message
+        temporary.unlink(missing_ok=True)
+        raise
     except OSError as error:
         temporary.unlink(missing_ok=True)
         raise _write_error(target, error) from error
@@ -77,6 +82,8 @@ def _is_stream(path: Path) -> bool:
 def _direct(target: Path) -> Iterator[Path]:
     try:
         yield target
+    except WriteError:
+        raise
     except OSError as error:
         raise _write_error(target, error) from error
 
@@ -91,6 +98,17 @@ def write_json(path: str | os.PathLike[str], document: Any, **dump_options: Any)
     """Write ``document`` as JSON (indented by 2 unless told, a newline at the end) atomically."""
     dump_options.setdefault("indent", 2)
     write_text(path, json.dumps(document, **dump_options) + "\n")
+
+
+def _mode(target: Path) -> int:
+    """The permissions the file gets: those of the file it replaces, else what ``open`` gives a
+    new file under the process's umask."""
+    try:
+        return stat.S_IMODE(target.stat().st_mode)
+    except FileNotFoundError:
+        umask = os.umask(0)
+        os.umask(umask)
+        return 0o666 & ~umask
 
 
 def _fsync(path: Path) -> None:

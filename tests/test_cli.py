@@ -153,3 +153,25 @@ def test_simulate_records_named_disturbances(tmp_path, capsys):
     assert main(["simulate", "--env", "marine_envs/ROV-v0", "--steps", "20", "--quiet",
                  "--disturbances", "wind", "--out", str(tmp_path / "x.csv")]) == 2
     assert "unknown disturbance(s) ['wind']" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+def test_a_streamed_recording_equals_the_one_made_in_memory(tmp_path, suffix):
+    from agents.evaluation import run_episode
+    from agents.simulate import _Run, record, simulate
+
+    # chunks of 7 rows: many chunk boundaries, and a last chunk part full
+    done = record(tmp_path / f"run{suffix}", "marine_envs/ROV-v0", 60, seed=5,
+                  disturbances=["current_n", "s_cmd"], chunk_rows=7)
+    streamed = read_recording(done.path)
+    in_memory = simulate("marine_envs/ROV-v0", 60, seed=5, disturbances=["current_n", "s_cmd"])
+    assert streamed.data.equals(in_memory.data)
+    assert streamed.meta == in_memory.meta and streamed.params == in_memory.params
+    assert done.steps == 60 and done.signal is None
+    assert done.stopped == streamed.meta["stopped"] == "the requested 60 steps were reached"
+    assert done.disturbance_names == ("current_n", "s_cmd") == streamed.disturbance_names
+    # the rows are what an episode of the same seed saw and did
+    run = _Run("marine_envs/ROV-v0", 60, 5, "prbs", None, (), {})
+    episode = run_episode(run.env, run.policy, 60, seed=5)
+    np.testing.assert_array_equal(streamed.inputs, episode.inputs)
+    np.testing.assert_array_equal(streamed.time, episode.time)

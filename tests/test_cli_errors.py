@@ -168,7 +168,9 @@ def test_implausible_values_warn_in_one_line_and_the_work_goes_on(tmp_path, caps
     assert code == 0 and "wrote" in out
     assert err.splitlines() == ["marine simulate: warning: hs=300 m is 150x the environment's "
                                 "default 2 m: far outside the range the model was built for "
-                                "(expect a diverging or meaningless run)"]
+                                "(expect a diverging or meaningless run)",
+                                "marine simulate: the episode terminated at step 8 of 50: "
+                                "phi = -41.05 deg left its limits [-40, 40] deg"]
 
 
 def test_the_installed_entry_point_reports_the_same_line():

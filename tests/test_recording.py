@@ -430,3 +430,33 @@ def test_a_model_with_measured_disturbances_takes_them_as_inputs():
     assert model.with_params(m=40.0).model.params.m == 40.0
     with pytest.raises(ValueError, match=r"give distinct names of current_n"):
         MeasuredDisturbances(rov, ("wind",))
+
+
+def test_a_streamed_recording_is_checked_row_by_row_and_written_whole(tmp_path):
+    from marine_envs.recording import stream_recording
+
+    path = tmp_path / "run.csv"
+    # any column order in, the format's order out; chunks of 2 rows
+    with stream_recording(path, "usv", ["phi", "time", "delta"], meta={"seed": 1},
+                          chunk_rows=2) as stream:
+        for k in range(5):
+            stream.append([0.01 * k, 0.1 * k, -0.02 * k])
+        assert not path.exists()  # only when whole
+        stream.meta["stopped"] = "done"  # the metadata may change until the end
+    written = read_recording(path)
+    assert list(written.data.columns) == ["time", "delta", "phi"]
+    np.testing.assert_array_equal(written.data["phi"], 0.01 * np.arange(5))
+    assert written.meta == {"seed": 1, "stopped": "done"}
+    earlier = path.read_bytes()
+    with pytest.raises(ValueError, match="column 'delta' has non-finite value inf at row 3"):
+        with stream_recording(path, "usv", ["time", "delta", "phi"], chunk_rows=2) as stream:
+            for k, delta in enumerate([0.0, 0.0, 0.0, math.inf]):
+                stream.append([0.1 * k, delta, 0.0])
+    with pytest.raises(ValueError, match="time is not strictly increasing at row 2"):
+        with stream_recording(path, "usv", ["time", "delta", "phi"], chunk_rows=2) as stream:
+            stream.extend([[0.0, 0, 0], [0.1, 0, 0], [0.1, 0, 0]])
+    with pytest.raises(ValueError, match="1 row"):
+        with stream_recording(path, "usv", ["time", "delta", "phi"]) as stream:
+            stream.append([0.0, 0.0, 0.0])
+    assert path.read_bytes() == earlier  # the recording before, whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run.csv", "run.csv.json"]

@@ -15,6 +15,8 @@ import numpy as np
 import pandas as pd
 
 from estimators.registry import ORACLE, RAW
+from marine_envs.files import atomic_path, write_text
+from marine_envs.provenance import save_figure
 
 from .grid import DEGRADATIONS, KEYS, Grid, parse_sensor
 from .run import ROWS
@@ -160,7 +162,7 @@ def plot_costs(rows: pd.DataFrame, path: Path) -> Path:
     fig.suptitle(f"Cost by estimator (sea {table['sea'].iloc[0]}, sensors "
                  f"{table['sensor'].iloc[0]})")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 
@@ -207,7 +209,7 @@ def plot_degradation(rows: pd.DataFrame, path: Path) -> Path | None:
     fig.legend(handles.values(), handles.keys(), loc="upper right", fontsize=8)
     fig.suptitle(f"Degradation curves ({controller})")
     fig.tight_layout(rect=(0, 0, 0.92, 1))
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
 
@@ -216,11 +218,12 @@ def write_outputs(rows: pd.DataFrame, out: Path) -> list[Path]:
     """``summary.md``, the figures and (with pyarrow) ``rows.parquet`` into ``out``."""
     written = [out / ROWS]
     try:
-        rows.to_parquet(out / "rows.parquet", index=False)
+        with atomic_path(out / "rows.parquet") as temporary:
+            rows.to_parquet(temporary, index=False)
         written.append(out / "rows.parquet")
     except ImportError:
         pass  # Parquet is optional: pip install 'marine-envs[parquet]'
-    (out / "summary.md").write_text(markdown_summary(rows))
+    write_text(out / "summary.md", markdown_summary(rows))
     written.append(out / "summary.md")
     if (rows["status"] == "ok").any():
         written.append(plot_costs(rows, out / "cost_by_estimator.png"))
@@ -253,7 +256,7 @@ def write_report(rows: pd.DataFrame, out: Path, report: Path, grid: Grid) -> Pat
             data = base64.b64encode((out / name).read_bytes()).decode()
             parts.append(f"<p><img src='data:image/png;base64,{data}' alt='{name}'></p>")
     page = report / "index.html"
-    page.write_text("\n".join(parts) + "\n")
+    write_text(page, "\n".join(parts) + "\n")
     return page
 
 

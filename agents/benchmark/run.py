@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -21,6 +22,7 @@ import gymnasium as gym
 import pandas as pd
 
 from estimators.registry import RAW
+from marine_envs.files import atomic_path, write_json, write_text
 
 from .grid import KEYS, SB3_ALGOS, SEAS, TRAINING_SEED, VEHICLES, Grid, cell_key, sensor_kwargs
 
@@ -43,7 +45,7 @@ def train_agent(out: Path, vehicle: str, estimator: str, algo: str, timesteps: i
               progress_bar=False, hyperparams={"validation_episodes": 0})
     except (ValueError, ImportError, FloatingPointError) as error:
         path.mkdir(parents=True, exist_ok=True)
-        (path / "untrainable.txt").write_text(str(error))
+        write_text(path / "untrainable.txt", str(error))
         return str(error)
     return None
 
@@ -169,7 +171,7 @@ def _check_settings(out: Path, grid: Grid) -> None:
         if before != json.loads(json.dumps(settings)):
             raise ValueError(f"{out} holds a grid run with {before}, not {settings}: resume "
                              "with the same --seeds/--seconds/--timesteps, or use another --out")
-    path.write_text(json.dumps(settings, indent=2) + "\n")
+    write_json(path, settings)
 
 
 def run_grid(grid: Grid, out: Path, backend: str = "local", workers: int = 2,
@@ -220,14 +222,18 @@ def _progress(results: Iterable[Any], total: int, what: str, show: bool) -> Iter
 
 
 def _append(path: Path, rows: list[dict]) -> None:  # path: out / ROWS
-    """Add one cell's rows to the CSV (a new column rewrites it: metrics differ by vehicle)."""
+    """Add one cell's rows to the CSV (a new column rewrites it: metrics differ by vehicle),
+    as a new whole file: a full disk or a kill on the way keeps the cells done before."""
     new = pd.DataFrame(rows)
-    if not path.exists():
-        new.to_csv(path, index=False)
-        return
-    header = pd.read_csv(path, nrows=0).columns
-    if set(new.columns) <= set(header):
-        new.reindex(columns=header).to_csv(path, mode="a", header=False, index=False)
-    else:
-        pd.concat([load_rows(path.parent), new], ignore_index=True).to_csv(path, index=False)
+    with atomic_path(path) as temporary:
+        if not path.exists():
+            new.to_csv(temporary, index=False)
+            return
+        header = pd.read_csv(path, nrows=0).columns
+        if set(new.columns) <= set(header):
+            shutil.copyfile(path, temporary)
+            new.reindex(columns=header).to_csv(temporary, mode="a", header=False, index=False)
+        else:
+            pd.concat([load_rows(path.parent), new], ignore_index=True).to_csv(temporary,
+                                                                             index=False)
 

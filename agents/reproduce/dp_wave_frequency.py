@@ -42,6 +42,7 @@ from estimators.wave_frequency import (
     WindowEstimate,
     estimate_window,
 )
+from marine_envs.provenance import save_figure
 
 from .base import Reproduction, spread
 
@@ -432,7 +433,7 @@ def _plot(series: dict[str, Any], path: Path) -> None:
     _plot_highpass(axes[1, 1], est, series["record"])
     _plot_change(axes[1, 2], series["change"])
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 

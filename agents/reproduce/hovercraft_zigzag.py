@@ -47,6 +47,7 @@ from estimators.identification import (
 )
 from marine_envs.envs.hovercraft import DEFAULT_SENSORS
 from marine_envs.models.hovercraft import HovercraftModel
+from marine_envs.provenance import save_figure
 
 from .base import Reproduction, spread
 
@@ -360,5 +361,5 @@ def _plot(run: dict[str, Any], traces: dict[str, tuple[Segment, np.ndarray]], pa
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=8, ncol=2)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     plt.close(fig)

@@ -33,6 +33,7 @@ from agents.lqr import LQRPolicy
 from estimators import AdaptiveKalmanFilter, KalmanFilter, wrap
 from estimators.base import Estimator
 from estimators.kalman import default_process_noise, held_noise_covariance
+from marine_envs.provenance import save_figure
 
 from .base import Reproduction, spread
 
@@ -246,5 +247,5 @@ def _plot(results: dict, steps: int, path: Path) -> None:
         axes[0, col].legend(loc="upper right")
         axes[1, col].set_xlabel("time (s)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)

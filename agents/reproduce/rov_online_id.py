@@ -61,6 +61,7 @@ from agents.feedforward import ERROR_SCALES, FeedforwardTracker
 from estimators.ekf import ExtendedKalmanFilter
 from marine_envs.envs.rov import CHANNELS, DEFAULT_SENSORS
 from marine_envs.models.rov import MORPHING, SEED_COEFFICIENTS, ROVModel
+from marine_envs.provenance import save_figure
 
 from .base import Reproduction, spread
 
@@ -449,7 +450,7 @@ def _plot(run: dict[str, Any], path: Path) -> None:
     fig.suptitle("The morphing-robot patent: coefficient estimates (one line per seed, +-2 std "
                  "band of seed 0) vs the true values; morph at the grey line", fontsize=11)
     fig.tight_layout(rect=(0, 0, 1, 0.98))
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path, dpi=90)
     plt.close(fig)
 
 

@@ -44,6 +44,7 @@ from estimators.pd_observer import (
 )
 from marine_envs.models import zoh
 from marine_envs.models.usv import USVModel
+from marine_envs.provenance import save_figure
 
 from .base import Reproduction, spread
 
@@ -387,5 +388,5 @@ def _plot(path: str | Path, runs: Mapping[str, Simulation], summary: Mapping[str
                 title="sway-speed error vs quantization step (corrected signals)")
     axes[2].legend(fontsize=7, ncol=2)
     axes[2].grid(alpha=0.3, which="both")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)

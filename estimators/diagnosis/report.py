@@ -17,6 +17,8 @@ Units are the model's SI units (angles in rad); frequencies are in rad/s like ``
 
 from __future__ import annotations
 
+import os
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -25,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
+from marine_envs.files import WriteError, write_text
 from marine_envs.models.effects import Effect, applied_inputs, state_term
 
 from . import model_test_figures, model_test_report
@@ -67,22 +70,49 @@ def owned_files(directory: str | Path) -> list[Path]:
 def write_report(diagnosis: Diagnosis, directory: str | Path, recording_name: str = "") -> Path:
     """Write ``report.md``, its figures and ``diagnosis.json`` into ``directory`` (created).
 
+    The report is made in a hidden folder inside ``directory`` first; only once all of it is
+    written does it replace the earlier report's files (every one of :data:`OWNED`, so that
+    no figure of an earlier run stays), ``report.md`` last. A full disk or an error on the
+    way leaves the earlier report as it was, never half a new one beside it.
+
     :param diagnosis: the result of :func:`~estimators.diagnosis.diagnose`.
-    :param directory: output folder; existing files of the same names are replaced.
+    :param directory: output folder; an earlier report in it is replaced.
     :param recording_name: shown in the title (e.g. the file name); default: the model's name.
     :returns: the path of ``report.md``.
+    :raises marine_envs.files.WriteError: a file cannot be written (naming its place in
+        ``directory``).
     """
     directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory(prefix=".report.", suffix=".part",
+                                         dir=directory) as staging:
+            try:
+                _write_into(diagnosis, Path(staging), recording_name)
+            except OSError as error:  # name the file asked for, not its staging place
+                raise WriteError(error.errno, str(error).replace(staging, str(directory)),
+                                 str(directory)) from error
+            for stale in owned_files(directory):
+                stale.unlink()
+            made = sorted(Path(staging).iterdir(), key=lambda p: p.name == "report.md")
+            for path in made:
+                os.replace(path, directory / path.name)
+    except WriteError:
+        raise
+    except OSError as error:
+        raise WriteError(error.errno, f"cannot write {directory}: {error.strerror or error}",
+                         str(directory)) from error
+    return directory / "report.md"
+
+
+def _write_into(diagnosis: Diagnosis, directory: Path, recording_name: str) -> None:
     diagnosis.to_json(directory / "diagnosis.json")
     figures: list[tuple[str, str]] = []
     if diagnosis.comparison is not None:  # a model test, judged in free simulation
         figures = model_test_figures.write_figures(diagnosis, directory, recording_name)
     elif diagnosis.mismatch is not None and diagnosis.residuals is not None:
         figures = write_figures(diagnosis, directory)
-    path = directory / "report.md"
-    path.write_text(markdown(diagnosis, figures, recording_name))
-    return path
+    write_text(directory / "report.md", markdown(diagnosis, figures, recording_name))
 
 
 def write_figures(diagnosis: Diagnosis, directory: Path) -> list[tuple[str, str]]:

@@ -19,8 +19,11 @@ def pyplot() -> Any:
 
 
 def save(fig: Any, path: Path) -> None:
+    """Save ``fig`` (whole or not at all, its provenance inside) and free it."""
+    from marine_envs.provenance import save_figure
+
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    save_figure(fig, path, dpi=100)
     fig.clf()
     import matplotlib.pyplot as plt
 

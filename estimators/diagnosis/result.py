@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from marine_envs.files import write_text
 from marine_envs.models.effects import Effect
 
 from .residuals import Forcing, Residuals
@@ -111,7 +112,7 @@ class Diagnosis:
     def to_json(self, path: str | Path | None = None) -> str:
         text = json.dumps(self.to_dict(), indent=2)
         if path is not None:
-            Path(path).write_text(text + "\n")
+            write_text(path, text + "\n")  # whole or not at all
         return text
 
     def summary(self) -> str:
