@@ -99,18 +99,24 @@ _SHARED_PARAM = re.compile(r"^(\s*):param (\w+(?:,\s*\w+)+):(.*)$")
 
 def _project_docstring(app, what, name, obj, options, lines: list[str]) -> None:
     converted: list[str] = []
+    pending: list[str] = []  # the other names of a shared field, after its continuation lines
+    indent = ""
     for line in lines:
+        if pending and not (line.startswith(indent + " ") and line.strip()):
+            converted += pending
+            pending = []
         heading = _HEADING.match(line)
         shared = _SHARED_PARAM.match(line)
         if heading:
             converted += [f"{heading[1]}.. rubric:: {heading[2]}", ""]
         elif shared:
+            indent = shared[1]
             first, *others = (n.strip() for n in shared[2].split(","))
-            converted.append(f"{shared[1]}:param {first}:{shared[3]}")
-            converted += [f"{shared[1]}:param {n}: see ``{first}``." for n in others]
+            converted.append(f"{indent}:param {first}:{shared[3]}")
+            pending = [f"{indent}:param {n}: see ``{first}``." for n in others]
         else:
             converted.append(_ABSOLUTE.sub(r"\\|\1\\|", line))
-    lines[:] = converted
+    lines[:] = converted + pending
 
 
 # -- References through the project's imports -------------------------------------------------

@@ -60,7 +60,7 @@ def spaces(env_id: str) -> Markdown:
         ("Episode length", f"{steps} steps ({steps * env.unwrapped.dt:g} s)"),
     ]
     env.close()
-    return _table(("", ""), rows)
+    return _table(("", "from the code"), rows)
 
 
 def arguments(env_id: str, meanings: dict[str, str]) -> Markdown:
