@@ -19,6 +19,7 @@ import argparse
 import contextlib
 import os
 import shlex
+import subprocess
 import sys
 import time
 from collections.abc import Iterator, Sequence
@@ -84,6 +85,7 @@ class Run:
     record: dict[str, str]
     blas: str
     load_start: float
+    changed: list[str] = field(default_factory=list)
     started: float = field(default_factory=time.perf_counter)
     blocks: list[Block] = field(default_factory=list)
     figures: list[tuple[Path, str]] = field(default_factory=list)
@@ -133,9 +135,21 @@ def benchmark_run(name: str, argv: Sequence[str]) -> Iterator[Run]:
     """Run the block with one BLAS thread and record it as ``python benchmarks/NAME.py ARGV``."""
     command = shlex.join(["python", f"benchmarks/{name}.py", *argv])
     with one_blas_thread() as pinned:
-        run = Run(name, command, run_record(command), pinned, _load())
+        run = Run(name, command, run_record(command), pinned, _load(), uncommitted_files())
         yield run
         run.finish()
+
+
+def uncommitted_files() -> list[str]:
+    """The checkout's tracked files that differ from its commit (what ``+dirty`` means in the
+    record: often the outputs of other benchmarks, such as their pages and figures)."""
+    try:
+        status = subprocess.run(["git", "-C", str(REPO), "status", "--porcelain",
+                                 "--untracked-files=no"], capture_output=True, text=True,
+                                timeout=10, check=True)
+    except (OSError, subprocess.SubprocessError):
+        return []
+    return [line[3:] for line in status.stdout.splitlines()]
 
 
 def add_docs_option(parser: argparse.ArgumentParser, name: str) -> None:
@@ -191,7 +205,8 @@ def provenance_lines(run: Run) -> list[str]:
     blas = run.blas + (f"; at the end: {run.blas_end}" if run.blas_end else "")
     wall = "" if run.seconds is None else f"{run.seconds:.0f} s"
     return [f"- command: `{run.command}`",
-            f"- code: marine-envs {record['version']}, commit `{record['commit']}`",
+            f"- code: marine-envs {record['version']}, commit `{record['commit']}`"
+            + (f" (uncommitted changes: {', '.join(run.changed)})" if run.changed else ""),
             f"- date: {record['date']}",
             f"- machine: {record['machine']}",
             f"- {blas}",
