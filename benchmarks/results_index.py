@@ -44,8 +44,8 @@ def page_summary(page: Path) -> dict[str, str]:
 
 
 def _first_sentence(text: str) -> str:
-    match = re.match(r"(.+?[.:])(\s|$)", text)
-    return (match.group(1) if match else text).rstrip(":") + "."
+    match = re.match(r"(.+?)\.(\s|$)", text)
+    return (match.group(1) if match else text.rstrip(".")) + "."
 
 
 def index(folder: Path) -> str:

@@ -128,14 +128,16 @@ def test_the_results_index_lists_every_page_with_its_command_and_time(tmp_path):
     with _common.benchmark_run("throughput", ["--docs"]) as run:
         run.show("| a |\n| --- |\n| 1 |")
     run.write_page(tmp_path / "throughput.md", "Environment throughput",
-                   "Steps per second against CartPole: more words.\nA second line.")
+                   "Steps per second against CartPole (`CartPole-v1`: 1.5 x). More words.\n"
+                   "A line.")
     (tmp_path / "index.md").write_text("an older index\n")
     index = load_benchmark("results_index")
     assert index.main(["--out", str(tmp_path / "index.md")]) == 0
     text = (tmp_path / "index.md").read_text()
     row = next(line for line in text.splitlines() if line.startswith("| [Environment"))
     assert row.startswith("| [Environment throughput](throughput.md) | Steps per second "
-                          "against CartPole. | `python benchmarks/throughput.py --docs` | ")
+                          "against CartPole (`CartPole-v1`: 1.5 x). | "
+                          "`python benchmarks/throughput.py --docs` | ")
     assert f"| {run.seconds:.0f} s | {run.record['date'][:10]} | {run.load_start:.1f} |" in row
     assert "```{toctree}\n:hidden:\n\nthroughput\n```" in text
     assert "`python benchmarks/filters.py --docs`" in text  # no page yet: named
