@@ -81,12 +81,13 @@ def format_table(rows: list[dict[str, Any]]) -> str:
              "| RL failed | LQR behind | LQR cost | LQR failed | RL / LQR | within 25 % |",
              "|---|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---|"]
     for r in rows:
-        lines.append(f"| {r['env']} | {r['agent']} | {r['estimator']} | {r['seed']} | {r['timesteps']} | "
-              f"{r['wall_seconds']:.0f} s | {r['episodes']} | "
-              f"{r['rl_cost']:.0f} ± {r['rl_std']:.0f} | {r['rl_failed']} | "
-              f"{r['lqr_estimator']} | {r['lqr_cost']:.0f} ± {r['lqr_std']:.0f} | "
-              f"{r['lqr_failed']} | "
-              f"{r['ratio']:.2f} | {'yes' if r['within_25_percent'] else 'no'} |")
+        lines.append(
+            f"| {r['env']} | {r['agent']} | {r['estimator']} | {r['seed']} | {r['timesteps']} | "
+            f"{r['wall_seconds']:.0f} s | {r['episodes']} | "
+            f"{r['rl_cost']:.0f} ± {r['rl_std']:.0f} | {r['rl_failed']} | "
+            f"{r['lqr_estimator']} | {r['lqr_cost']:.0f} ± {r['lqr_std']:.0f} | "
+            f"{r['lqr_failed']} | "
+            f"{r['ratio']:.2f} | {'yes' if r['within_25_percent'] else 'no'} |")
     return "\n".join(lines)
 
 
