@@ -44,8 +44,14 @@ def page_summary(page: Path) -> dict[str, str]:
 
 
 def _first_sentence(text: str) -> str:
-    match = re.match(r"(.+?)\.(\s|$)", text)
-    return (match.group(1) if match else text.rstrip(".")) + "."
+    """Up to the first full stop or colon outside parentheses and code."""
+    depth, code = 0, False
+    for k, char in enumerate(text):
+        code ^= char == "`"
+        depth += (char == "(") - (char == ")")
+        if not code and depth == 0 and char in ".:" and text[k + 1:k + 2] in ("", " "):
+            return text[:k] + "."
+    return text.rstrip(".") + "."
 
 
 def index(folder: Path) -> str:
