@@ -42,7 +42,7 @@ def run_record(command: str | None = None) -> dict[str, str]:
 
     :param command: the command line to record; by default this process's own arguments.
     :return: ``command``, ``version`` (the package's), ``commit`` (the git commit of the
-        checkout, ``+dirty`` when it has uncommitted changes, ``unknown`` outside a checkout),
+        checkout, ``+dirty`` when its code or data has uncommitted changes, ``unknown`` outside a checkout),
         ``date`` (UTC, ISO 8601), ``machine`` (:func:`machine_description`) and ``load``
         (the 1-minute load average when the run started its record).
     """
@@ -129,8 +129,10 @@ def _git_commit() -> str:
     try:
         head = subprocess.run(["git", "-C", str(_ROOT), "rev-parse", "--short", "HEAD"],
                               capture_output=True, text=True, timeout=10, check=True)
+        # changed code or data; the figures and results pages runs rewrite do not count
         dirty = subprocess.run(["git", "-C", str(_ROOT), "status", "--porcelain",
-                                "--untracked-files=no"],
+                                "--untracked-files=no", "--", ".", ":(exclude)*.png",
+                                ":(exclude)docs/results"],
                                capture_output=True, text=True, timeout=10, check=True)
     except (OSError, subprocess.SubprocessError):
         return "unknown"
