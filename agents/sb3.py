@@ -1223,19 +1223,27 @@ def _run(config: dict[str, Any], out: Path, saved: Saved | None, progress_bar: b
             callbacks.append(progress)
         logger = configure_logger(0, tensorboard, type(model).__name__, saved is None)
         model.set_logger(logger)  # SB3's own, as learn() would make it, but closed here
-        threads = torch.get_num_threads()
-        torch.set_num_threads(torch_threads or threads)
         began = time.perf_counter()
         try:
-            with _log_closed(logger, out / "tb"):
+            with _torch_threads(torch_threads), _log_closed(logger, out / "tb"):
                 model.learn(target - start, callback=callbacks,
                             reset_num_timesteps=saved is None)
         finally:
-            torch.set_num_threads(threads)
             if progress is not None:
                 progress.close(int(model.num_timesteps))
         wall = time.perf_counter() - began
         return _finish(model, venv, keeper, config, out, wall, start, stop.received)
+
+
+@contextlib.contextmanager
+def _torch_threads(threads: int | None) -> Iterator[None]:
+    """Torch's intra-op threads set to ``threads`` for the block (None: left as they are)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads or before)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
 
 
 @contextlib.contextmanager
@@ -1365,12 +1373,16 @@ def load_agent(path: Path) -> Agent:
 
 
 def evaluate(out: Path, episodes: int = 5, seed: int = 0,
-             progress: Callable[[int], None] | None = None) -> list[dict[str, float]]:
+             progress: Callable[[int], None] | None = None, torch_threads: int | None = 1
+             ) -> list[dict[str, float]]:
     """Score the agent saved in ``out`` (a run folder, a checkpoint or a model file of it) on
     ``episodes`` episodes of seeds ``seed, seed + 1, ...``, behind its training estimator
     (:func:`agents.evaluation.evaluate`).
 
     :param progress: called with the number of steps done since its last call.
+    :param torch_threads: torch's intra-op threads meanwhile (None: leave as is); one, as in
+        :func:`train`: two USV episodes took 16 s with torch's two threads, 2.9 s with one, on
+        a loaded 2-core machine.
     :return: one row of :func:`~agents.evaluation.episode_metrics` per episode (cost,
         failures, RMS errors, actuator usage, estimation errors), with its ``seed``.
     """
@@ -1378,7 +1390,8 @@ def evaluate(out: Path, episodes: int = 5, seed: int = 0,
         raise ValueError(f"episodes={episodes!r} is invalid: an integer >= 1")
     agent = load_agent(out)
     config = agent.config
-    return evaluation.evaluate(config["env_id"], lambda venv: agent,
-                               config["estimator"] or RAW, range(seed, seed + episodes),
-                               max_episode_steps=config.get("max_episode_steps"),
-                               progress=progress)
+    with _torch_threads(torch_threads):
+        return evaluation.evaluate(config["env_id"], lambda venv: agent,
+                                   config["estimator"] or RAW, range(seed, seed + episodes),
+                                   max_episode_steps=config.get("max_episode_steps"),
+                                   progress=progress)
