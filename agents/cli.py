@@ -533,7 +533,7 @@ def _train(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         if given:
             parser.error(f"--resume takes the run's settings from {args.resume}/config.json: "
                          f"drop {', '.join(_option(n) for n in given)}")
-        sb3.latest(Path(args.resume))  # a run with something saved, before any work
+        # refuses a live run, then finds the last agent that loads, before any work
         result = sb3.resume(Path(args.resume), args.timesteps, progress_bar=not args.quiet)
     else:
         if args.env_id is None or args.out is None:
@@ -545,16 +545,17 @@ def _train(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         sb3.settings(args.env_id, args.algo or "ppo", args.estimator, args.timesteps,
                      args.seed or 0, args.n_envs, args.backend or "native",
                      hyperparams_file=config)
+        sb3.check_not_in_use(Path(args.out))  # a live run is named as such, --force or not
         out = _output_dir(args.out, args.force, "--out", sb3.existing_run,
                           " (a training run: --resume it)")
         result = sb3.train(args.env_id, args.algo or "ppo", args.estimator, args.timesteps,
                            out, args.seed or 0, args.n_envs, args.backend or "native",
                            progress_bar=not args.quiet, hyperparams_file=config,
                            force=args.force)
-    if result.interrupted:
+    if result.stop_signal is not None:
         print(f"marine train: interrupted at {result.timesteps} steps, saved to {result.out} "
               f"(continue: marine train --resume {result.out})", file=sys.stderr)
-        return EXIT_INTERRUPTED
+        return 128 + result.stop_signal  # the shell's convention: 130 SIGINT, 143 SIGTERM
     since = f" (from {result.resumed_from})" if result.resumed_from else ""
     print(f"trained {result.timesteps} steps{since} in {result.wall_seconds:.1f} s "
           f"({result.steps_per_second:.0f} steps/s); saved to {result.out}")

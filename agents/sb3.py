@@ -7,9 +7,14 @@ state estimator. Hyperparameters come from ``agents/hyperparams.yaml`` (RL-Zoo s
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
+import difflib
+import errno
+import fcntl
 import importlib.util
+import inspect
 import json
 import math
 import os
@@ -19,7 +24,10 @@ import shutil
 import signal
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+import traceback
+import warnings
+import zipfile
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -29,8 +37,11 @@ import torch
 from gymnasium.vector import AutoresetMode, VectorEnv, VectorWrapper
 from stable_baselines3 import A2C, PPO, SAC, TD3
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.save_util import load_from_zip_file
+from stable_baselines3.common.utils import configure_logger
 from stable_baselines3.common.vec_env import (
     DummyVecEnv,
     VecEnv,
@@ -43,6 +54,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepR
 import marine_envs
 from estimators import registry
 from estimators.registry import ORACLE, RAW
+from marine_envs.files import WriteError, atomic_path, write_json
 
 from . import evaluation
 
@@ -90,9 +102,14 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     updated with the env's own entry. Keys: ``n_timesteps``, ``n_envs``, ``policy``,
     ``normalize`` (a bool or ``VecNormalize``'s keyword arguments), optional ``policy_kwargs``,
     ``failure_penalty`` and ``failure_cost_to_go`` (:class:`FailurePenalty`) and
-    ``validation_episodes``
-    (:class:`KeepBest`), and algorithm keyword arguments (``learning_rate`` and ``clip_range``
-    may be RL-Zoo's ``"lin_<x>"``: decayed linearly to 0)."""
+    ``validation_episodes`` (:class:`KeepBest`), and algorithm keyword arguments
+    (``learning_rate`` and ``clip_range`` may be RL-Zoo's ``"lin_<x>"``: decayed linearly to 0).
+
+    The whole file is checked first (:func:`check_hyperparams`), not only the entry used.
+
+    :raises ValueError: an unreadable file, an unknown section, algorithm or setting, or a
+        value out of its range, named with the file.
+    """
     _check_choice("env_id", env_id, tuple(marine_envs.ENVIRONMENTS))
     _check_choice("algo", algo, tuple(ALGOS))
     import yaml  # here: only reading the settings needs PyYAML
@@ -101,12 +118,8 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
         table = yaml.safe_load(path.read_text())
     except yaml.YAMLError as error:
         raise ValueError(f"{path}: invalid YAML: {_one_line(error)}") from None
-    if not isinstance(table, dict) or not all(isinstance(v, dict) for v in table.values()):
-        raise ValueError(f"{path}: must map env ids (and 'default') to algorithms to settings, "
-                         "as agents/hyperparams.yaml does")
+    check_hyperparams(table, path)
     sections = [table.get(key, {}).get(algo) or {} for key in ("default", env_id)]
-    if not all(isinstance(section, dict) for section in sections):
-        raise ValueError(f"{path}: the settings of {algo!r} must be a mapping of names to values")
     params = {**sections[0], **sections[1]}
     if not params:
         raise ValueError(f"{path} has no settings for algo {algo!r} (nor a default)")
@@ -114,6 +127,150 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     if missing:
         raise ValueError(f"{path}: the settings of {algo!r} on {env_id} lack {missing}")
     return params
+
+
+def check_hyperparams(table: Any, path: Path) -> None:
+    """Check a hyperparameter table as read from ``path``: sections named by environment ids
+    or ``default``, algorithms of :data:`ALGOS` in them, and in each the settings of ours
+    (:data:`OWN_SETTINGS`) or keyword arguments of the algorithm (only their values when the
+    algorithm's extra is not installed), each in its range: numbers of steps, batches and
+    epochs >= 1, rates > 0 (or ``"lin_<x>"``), ``normalize`` a bool or ``VecNormalize``'s
+    keyword arguments, ...
+
+    :raises ValueError: the first mistake, named with ``path`` and where in it (a short id such
+        as ``USV-v0`` for a section gets the full one suggested).
+    """
+    if not isinstance(table, dict):
+        raise ValueError(f"{path}: must map environment ids (and 'default') to algorithms to "
+                         "settings, as agents/hyperparams.yaml does")
+    for section, entries in table.items():
+        if section != "default" and section not in marine_envs.ENVIRONMENTS:
+            raise ValueError(f"{path}: unknown section {section!r}{_env_suggestion(section)}: "
+                             "sections are 'default' and environment ids "
+                             f"({', '.join(marine_envs.ENVIRONMENTS)})")
+        if not isinstance(entries, dict):
+            raise ValueError(f"{path}: {section}: must map algorithms to their settings, "
+                             "e.g. 'ppo: {n_steps: 512}'")
+        for algo, entry in entries.items():
+            if algo not in ALGOS:
+                raise ValueError(f"{path}: {section}: unknown algorithm {algo!r}"
+                                 f"{_did_you_mean(algo, ALGOS)}: one of {', '.join(ALGOS)}")
+            if not isinstance(entry, dict | None):
+                raise ValueError(f"{path}: {section}: {algo}: must map setting names to values")
+            _check_settings(entry or {}, algo, f"{path}: {section}: {algo}")
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _is_rate(value: Any) -> bool:
+    """A number > 0, or RL-Zoo's ``"lin_<x>"`` with ``x`` > 0."""
+    if isinstance(value, str) and value.startswith("lin_"):
+        try:
+            value = float(value[4:])
+        except ValueError:
+            return False
+    return _is_number(value) and value > 0
+
+
+_AT_LEAST_1 = (lambda v: _is_int(v) and v >= 1, "an integer >= 1")
+_RATE = (_is_rate, "a number > 0, or 'lin_<x>' (decayed linearly from x > 0 to 0), "
+                   "e.g. 'lin_3e-4'")
+_FRACTION = (lambda v: _is_number(v) and 0 <= v <= 1, "a number in [0, 1]")
+#: What each setting's value must be (said so in an error); the algorithm checks the others.
+_RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "n_timesteps": _AT_LEAST_1, "n_envs": _AT_LEAST_1, "n_steps": _AT_LEAST_1,
+    "batch_size": _AT_LEAST_1, "n_epochs": _AT_LEAST_1, "buffer_size": _AT_LEAST_1,
+    "learning_starts": (lambda v: _is_int(v) and v >= 0, "an integer >= 0"),
+    "gradient_steps": (lambda v: _is_int(v) and (v >= 1 or v == -1),
+                       "an integer >= 1, or -1 (as many as environment steps)"),
+    "validation_episodes": (lambda v: _is_int(v) and v >= 0,
+                            "an integer >= 1, or 0 (no validation)"),
+    "learning_rate": _RATE, "clip_range": _RATE,
+    "gamma": _FRACTION, "gae_lambda": _FRACTION, "tau": _FRACTION,
+    "failure_penalty": (lambda v: _is_number(v) and v >= 0, "a finite number >= 0"),
+    "failure_cost_to_go": (lambda v: isinstance(v, bool), "true or false"),
+    "normalize": (lambda v: isinstance(v, bool | Mapping),
+                  "true, false or VecNormalize's keyword arguments, e.g. {clip_reward: 10000}"),
+    "policy": (lambda v: isinstance(v, str) and bool(v), "a policy name, e.g. MlpPolicy"),
+    "policy_kwargs": (lambda v: isinstance(v, Mapping),
+                      "the policy's keyword arguments, e.g. {net_arch: [64, 64]}"),
+}
+#: Settings of ours (:func:`load_hyperparams`); the others are the algorithm's keyword arguments.
+OWN_SETTINGS = ("n_timesteps", "n_envs", "policy", "normalize", "policy_kwargs",
+                "failure_penalty", "failure_cost_to_go", "validation_episodes")
+#: The algorithms' keyword arguments that :func:`train` sets itself: not settings.
+_SET_BY_TRAIN = ("self", "policy", "env", "seed", "device", "verbose", "tensorboard_log",
+                 "_init_setup_model")
+
+
+def _check_settings(settings: Mapping[str, Any], algo: str, where: str) -> None:
+    """Check the settings of one ``algo`` entry (see :func:`check_hyperparams`).
+
+    :param where: what the settings are, for the error (e.g. ``"FILE: default: ppo"``).
+    :raises ValueError: the first unknown setting or bad value, named with ``where``.
+    """
+    _check_choice("algo", algo, tuple(ALGOS))
+    try:
+        cls: type[BaseAlgorithm] | None = algorithm(algo)
+    except ValueError:  # an extra that is not installed: its names are unknown here
+        cls = None
+    known = None if cls is None else (*OWN_SETTINGS, *_keywords(cls))
+    for key, value in settings.items():
+        if known is not None and key not in known:
+            raise ValueError(f"{where}: unknown setting {key!r}{_did_you_mean(key, known)}")
+        check, what = _RULES.get(key, (lambda v: True, ""))
+        if not check(value):
+            raise ValueError(f"{where}: {key}={value!r} is invalid: {what}{_text_hint(value)}")
+    normalize = settings.get("normalize")
+    if isinstance(normalize, Mapping):
+        allowed = _keywords(VecNormalize, ("self", "venv"))
+        unknown = [key for key in normalize if key not in allowed]
+        if unknown:
+            raise ValueError(f"{where}: normalize: unknown setting {unknown[0]!r}"
+                             f"{_did_you_mean(unknown[0], allowed)}: VecNormalize takes "
+                             f"{', '.join(allowed)}")
+    policies, policy = getattr(cls, "policy_aliases", {}), settings.get("policy")
+    if policies and policy is not None and policy not in policies:
+        raise ValueError(f"{where}: policy={policy!r} is invalid: one of {', '.join(policies)}"
+                         f"{_did_you_mean(policy, policies)}")
+
+
+def _keywords(cls: type, leave_out: Sequence[str] = _SET_BY_TRAIN) -> tuple[str, ...]:
+    """The keyword arguments of ``cls``, but those in ``leave_out``."""
+    parameters = inspect.signature(cls.__init__).parameters.values()
+    return tuple(p.name for p in parameters if p.name not in leave_out
+                 and p.kind not in (p.VAR_POSITIONAL, p.VAR_KEYWORD))
+
+
+def _did_you_mean(name: Any, choices: Sequence[str] | Mapping[str, Any]) -> str:
+    close = difflib.get_close_matches(str(name), list(choices), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def _env_suggestion(name: Any) -> str:
+    """`` (did you mean 'marine_envs/USV-v0'?)`` for ``USV-v0``, ``usv`` or a near miss."""
+    for full in marine_envs.ENVIRONMENTS:
+        short = full.split("/")[1].lower()
+        if str(name).lower().removeprefix("marine_envs/") in (short, short.removesuffix("-v0")):
+            return f" (did you mean {full!r}?)"
+    return _did_you_mean(name, marine_envs.ENVIRONMENTS)
+
+
+def _text_hint(value: Any) -> str:
+    """A hint for a number YAML read as text: PyYAML (YAML 1.1) needs a dot in ``3.0e-4``."""
+    if isinstance(value, str):
+        try:
+            float(value)
+        except ValueError:
+            return ""
+        return " (YAML reads it as text: write the number with a decimal point, e.g. 3.0e-4)"
+    return ""
 
 
 def _one_line(error: BaseException) -> str:
@@ -348,9 +505,7 @@ class KeepBest(BaseCallback):
         if self.best is None or (score["failed"], score["cost"]) < (self.best["failed"],
                                                                     self.best["cost"]):
             self.best = score
-            self.model.save(self.out / "model.zip")
-            if normalizer is not None:
-                normalizer.save(str(self.out / "vecnormalize.pkl"))
+            _save_agent(self.model, self.out / "model.zip", self.out / "vecnormalize.pkl")
 
 
 # -- building environments ------------------------------------------------------------------
@@ -417,8 +572,9 @@ class TrainResult:
     """What :func:`train` did: output directory, environment steps taken in all (a resumed run
     counts its earlier steps), wall-clock time of this session (s) and its throughput
     (environment steps per second, learning and validation included); with validation, the
-    score of the agent kept in ``model.zip`` (timesteps, failed, cost); whether Ctrl-C stopped
-    it (it was saved all the same) and the step count it started from."""
+    score of the agent kept in ``model.zip`` (timesteps, failed, cost); whether a signal
+    stopped it (it was saved all the same), the step count it started from and the signal
+    (``signal.SIGINT`` or ``signal.SIGTERM``; None when it ran to its end)."""
 
     out: Path
     timesteps: int
@@ -427,35 +583,45 @@ class TrainResult:
     selected: dict[str, float] | None = None
     interrupted: bool = False
     resumed_from: int = 0
+    stop_signal: int | None = None
 
 
 def _importable(*modules: str) -> bool:
     return all(importlib.util.find_spec(m) is not None for m in modules)
 
 
-class _SigintStops:
-    """While active: the first SIGINT (Ctrl-C) asks training to stop at the next step, where
-    everything can be saved whole (a ``KeyboardInterrupt`` may land in the middle of writing
-    a checkpoint); a second one interrupts at once. Only in the main thread (where Python
-    delivers signals); elsewhere SIGINT keeps its handler."""
+class _StopSignals:
+    """While active: the first SIGINT (Ctrl-C) or SIGTERM (a scheduler's or ``kill``'s stop)
+    asks training to stop at the next step, where everything can be saved whole; a second
+    one interrupts at once (``KeyboardInterrupt``: a file being written is left as it was).
+    Only in the main thread (where Python delivers signals); elsewhere they keep their
+    handlers."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self) -> None:
-        self.requested = False
-        self._previous: Any = None
+        #: the signal that asked to stop, None until one did
+        self.received: int | None = None
+        self._previous: dict[int, Any] = {}
 
-    def __enter__(self) -> _SigintStops:
+    @property
+    def requested(self) -> bool:
+        return self.received is not None
+
+    def __enter__(self) -> _StopSignals:
         if threading.current_thread() is threading.main_thread():
-            self._previous = signal.signal(signal.SIGINT, self._handle)
+            self._previous = {s: signal.signal(s, self._handle) for s in self.SIGNALS}
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
+        for number, handler in self._previous.items():
+            # None: a handler installed outside Python, which cannot be put back
+            signal.signal(number, signal.SIG_DFL if handler is None else handler)
 
     def _handle(self, signum: int, frame: Any) -> None:
         if self.requested:
             raise KeyboardInterrupt
-        self.requested = True
+        self.received = signum
 
 
 class _StopWhen(BaseCallback):
@@ -491,11 +657,52 @@ class _Progress(BaseCallback):
         self.bar.close()
 
 
+class _Checkpoints(BaseCallback):
+    """Every ``every`` calls (vector steps), save the agent into ``folder`` as
+    ``model_<steps>_steps.zip`` with its normalisation statistics
+    ``model_vecnormalize_<steps>_steps.pkl`` (SB3's ``CheckpointCallback`` names), each file
+    whole (:func:`_save_agent`; SB3's callback writes in place, so a full disk or a kill left
+    a truncated checkpoint)."""
+
+    def __init__(self, every: int, folder: Path) -> None:
+        super().__init__()
+        self.every, self.folder = every, folder
+
+    def _init_callback(self) -> None:
+        self.folder.mkdir(parents=True, exist_ok=True)
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.every == 0:
+            model = self.folder / f"model_{self.num_timesteps}_steps.zip"
+            _save_agent(self.model, model, _statistics_of(model))
+        return True
+
+
+def _save_agent(model: BaseAlgorithm, path: Path, statistics: Path) -> None:
+    """Save ``model`` to ``path`` and its normalisation statistics (if it has any) to
+    ``statistics``, each written whole (:func:`marine_envs.files.atomic_path`): both are
+    written before either replaces its file, so a full disk changes neither, and the statistics
+    land first, so a model file is never without its own.
+
+    :raises marine_envs.files.WriteError: a file could not be written (named).
+    """
+    normalizer = model.get_vec_normalize_env()
+    try:
+        with atomic_path(path) as model_file:
+            with open(model_file, "wb") as f:  # closed on an error too (SB3 leaves its open)
+                model.save(f)
+            if normalizer is not None:
+                with atomic_path(statistics) as statistics_file:
+                    normalizer.save(str(statistics_file))
+    except WriteError as error:  # the statistics' error, wrapped by the model's atomic_path
+        while isinstance(error.__cause__, WriteError):
+            error = error.__cause__
+        raise error from None
+
+
 def _write_config(out: Path, config: Mapping[str, Any]) -> None:
     """``config.json``, replaced whole (a reader never sees half of it)."""
-    tmp = out / f".{CONFIG}.tmp"
-    tmp.write_text(json.dumps(config, indent=2) + "\n")
-    os.replace(tmp, out / CONFIG)
+    write_json(out / CONFIG, config)
 
 
 def read_config(run: Path) -> dict[str, Any]:
@@ -523,13 +730,139 @@ def existing_run(out: Path) -> list[str]:
 
 
 def clear_run(out: Path) -> None:
-    """Remove what :func:`train` wrote into ``out`` (:data:`OWNED`), and nothing else."""
+    """Remove what :func:`train` wrote into ``out`` (:data:`OWNED`, and the temporary files of
+    its writes that a kill cut short), and nothing else."""
     for name in OWNED:
         path = Path(out) / name
         if path.is_dir():
             shutil.rmtree(path)
         elif path.exists():
             path.unlink()
+    for temporary in Path(out).glob(".*.part*"):  # marine_envs.files.atomic_path's
+        if any(temporary.name.startswith(f".{name}.") for name in OWNED):
+            temporary.unlink()
+
+
+# -- one writer a run folder ----------------------------------------------------------------
+
+#: The lock file of a run folder: locked by the training that writes the folder, holding its pid.
+LOCK = ".lock"
+
+
+class RunInUse(BlockingIOError):
+    """Another training is writing the run folder: ``folder``, locked by process ``pid`` (None
+    when it cannot be read)."""
+
+    def __init__(self, folder: Path, pid: int | None) -> None:
+        holder = "another process" if pid is None else f"pid {pid}"
+        super().__init__(errno.EWOULDBLOCK, f"{folder} is being written by another training "
+                         f"({holder}): wait for it to end, or train into another folder")
+        self.folder, self.pid = folder, pid
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+@contextlib.contextmanager
+def run_lock(out: Path) -> Iterator[None]:
+    """Hold the lock of the run folder ``out`` (created if need be) for the block, so that
+    two trainings (new, resumed or forced) never write into one folder. The lock is an
+    ``flock`` of ``out/.lock``, which holds the writer's pid; the kernel drops it when the
+    process ends, however it ends (SIGKILL too), so a dead run never leaves its folder locked.
+    A folder made here is removed again if it holds none of a run when the block ends (a
+    setting refused when the environments are built).
+
+    :raises RunInUse: another process holds the lock.
+    """
+    out = Path(out)
+    made = [folder for folder in (out, *out.parents) if not folder.exists()]  # deepest first
+    out.mkdir(parents=True, exist_ok=True)
+    lock = _lock(out / LOCK)
+    try:
+        yield
+    finally:
+        if made and not existing_run(out):
+            (out / LOCK).unlink()  # while locked: see _lock
+            with contextlib.suppress(OSError):  # one that something else wrote into stays
+                for folder in made:
+                    folder.rmdir()
+        os.close(lock)  # releases the lock
+
+
+def _lock(path: Path) -> int:
+    """Lock ``path`` (created if need be) and write this process's pid into it; the returned
+    descriptor holds the lock until it is closed.
+
+    :raises RunInUse: another process holds it.
+    """
+    while True:
+        descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        if not _flock(descriptor, fcntl.LOCK_EX, patience=0.5):  # a check_not_in_use's moment
+            os.close(descriptor)
+            raise RunInUse(path.parent, _holder(path))
+        if _same_file(descriptor, path):
+            break
+        os.close(descriptor)  # removed since it was opened (a failed start's cleanup): anew
+    try:
+        os.ftruncate(descriptor, 0)
+        os.write(descriptor, f"{os.getpid()}\n".encode())
+    except OSError as error:
+        os.close(descriptor)
+        raise WriteError(error.errno or errno.EIO, f"cannot write {path}: {error.strerror}",
+                         str(path)) from error
+    return descriptor
+
+
+def check_not_in_use(out: Path) -> None:
+    """Refuse the run folder ``out`` if a training is writing it, before any work (and without
+    creating anything: the training itself takes the lock, :func:`run_lock`).
+
+    :raises RunInUse: a training holds its lock.
+    """
+    path = Path(out) / LOCK
+    try:
+        descriptor = os.open(path, os.O_RDONLY)
+    except (FileNotFoundError, NotADirectoryError):
+        return  # no lock file: never trained into
+    try:
+        if not _flock(descriptor, fcntl.LOCK_SH, patience=0.0):
+            raise RunInUse(Path(out), _holder(path))
+    finally:
+        os.close(descriptor)  # releases the shared lock at once
+
+
+def _flock(descriptor: int, operation: int, patience: float) -> bool:
+    """Lock ``descriptor`` (``fcntl.LOCK_EX`` or ``LOCK_SH``) without blocking, trying again
+    for ``patience`` seconds; whether it is locked."""
+    deadline = time.monotonic() + patience
+    while True:
+        try:
+            fcntl.flock(descriptor, operation | fcntl.LOCK_NB)
+            return True
+        except BlockingIOError:
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(0.01)
+
+
+def _same_file(descriptor: int, path: Path) -> bool:
+    try:
+        return os.path.samestat(os.fstat(descriptor), os.stat(path))
+    except FileNotFoundError:
+        return False
+
+
+def _holder(path: Path) -> int | None:
+    """The pid in the lock file ``path``, None if it holds none."""
+    for _ in range(100):  # the holder writes it right after locking: give it a moment
+        try:
+            text = path.read_text().strip()
+        except OSError:
+            return None
+        if text:
+            return int(text) if text.isdigit() else None
+        time.sleep(0.01)
+    return None
 
 
 def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
@@ -544,9 +877,11 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
     ``last_model.zip`` the last, and ``config.json`` has each validation's scores.
 
     ``config.json`` is written first (``"status": "running"``) and rewritten at the end
-    (``"complete"``, with the step count). Ctrl-C (SIGINT) stops training at the next step and
-    saves the agent as at the end (``"interrupted"``; :attr:`TrainResult.interrupted`);
-    :func:`resume` continues it.
+    (``"complete"``, with the step count). Ctrl-C (SIGINT) or SIGTERM stops training at the
+    next step and saves the agent as at the end (``"interrupted"``;
+    :attr:`TrainResult.interrupted`); :func:`resume` continues it. Every file is written whole
+    (a full disk or a kill leaves the earlier one, or none), and the folder is locked while
+    training writes it (:func:`run_lock`).
 
     :param timesteps: environment steps (default: the YAML's ``n_timesteps``).
     :param n_envs: parallel environments (default: the YAML's).
@@ -559,14 +894,18 @@ def train(env_id: str, algo: str = "ppo", estimator: str | None = None,
         (:func:`clear_run`), so that two runs never mix; False: refuse such a folder (what
         ``marine train`` does without ``--force``).
     :raises FileExistsError: ``out`` holds a run and ``force`` is False.
+    :raises RunInUse: another training is writing ``out`` (``force`` or not).
+    :raises marine_envs.files.WriteError: a file could not be written (named).
     """
     config = settings(env_id, algo, estimator, timesteps, seed, n_envs, backend, hyperparams,
                       max_episode_steps, hyperparams_file)
     out = Path(out)
-    if not force and existing_run(out):
-        raise FileExistsError(f"{out} already holds a training run ({', '.join(existing_run(out))})"
-                              ": continue it with --resume, or replace it with --force")
-    return _run(config, out, None, progress_bar, torch_threads)
+    with run_lock(out):
+        held = existing_run(out)
+        if held and not force:
+            raise FileExistsError(f"{out} already holds a training run ({', '.join(held)}): "
+                                  "continue it with --resume, or replace it with --force")
+        return _run(config, out, None, progress_bar, torch_threads)
 
 
 def settings(env_id: str, algo: str = "ppo", estimator: str | None = None,
@@ -576,12 +915,15 @@ def settings(env_id: str, algo: str = "ppo", estimator: str | None = None,
              ) -> dict[str, Any]:
     """The validated settings of a :func:`train` run, as its ``config.json`` starts.
 
-    :raises ValueError: an unknown env id, algorithm, estimator or backend, or a step or
-        environment count that is not a positive integer (naming it), before any work.
+    :raises ValueError: an unknown env id, algorithm, estimator or backend, a step or
+        environment count that is not a positive integer, or a setting of the file or of
+        ``hyperparams`` out of its range or unknown (:func:`check_hyperparams`), naming it,
+        before any work.
     """
     algorithm(algo)  # an extra's algorithm is imported here: a missing extra named up front
     _check_choice("estimator", estimator, estimator_choices())
     _check_choice("backend", backend, BACKENDS)
+    _check_settings(dict(hyperparams or {}), algo, "hyperparams")
     params = {**load_hyperparams(env_id, algo, Path(hyperparams_file)),
               **dict(hyperparams or {})}
     yaml_timesteps, yaml_envs = params.pop("n_timesteps"), params.pop("n_envs")
@@ -591,15 +933,6 @@ def settings(env_id: str, algo: str = "ppo", estimator: str | None = None,
     n_envs = yaml_envs if n_envs is None else n_envs
     if not (isinstance(n_envs, int) and n_envs >= 1):
         raise ValueError(f"n_envs={n_envs!r} is invalid: an integer >= 1")
-    for key in ("learning_rate", "clip_range"):
-        _schedule(params.get(key))  # a malformed "lin_" fails here, not after the setup
-    episodes = params.get("validation_episodes", 0)
-    if episodes and not (isinstance(episodes, int) and episodes >= 1):
-        raise ValueError(f"validation_episodes={episodes!r} is invalid: an integer >= 1 "
-                         "(or 0 in the settings: no validation)")
-    penalty = params.get("failure_penalty", 0.0)
-    if not (isinstance(penalty, int | float) and math.isfinite(penalty) and penalty >= 0):
-        raise ValueError(f"failure_penalty={penalty!r} is invalid: a finite number >= 0")
     return {"env_id": env_id, "algo": algo, "estimator": estimator or RAW, "seed": seed,
             "n_envs": n_envs, "backend": backend, "max_episode_steps": max_episode_steps,
             "hyperparams_file": str(hyperparams_file), "hyperparams": copy.deepcopy(params),
@@ -621,6 +954,11 @@ class Saved:
     timesteps: int | None
 
 
+class FallbackWarning(UserWarning):
+    """The agent asked for cannot be used (a run killed before saving, a truncated or corrupt
+    file): an earlier one is used instead; the message says which and why."""
+
+
 def _statistics_of(model: Path) -> Path:
     """Where :func:`train` saves the normalisation statistics that go with ``model``."""
     found = _CHECKPOINT.fullmatch(model.name)
@@ -630,12 +968,66 @@ def _statistics_of(model: Path) -> Path:
 
 
 def _saved(model: Path, run: Path, config: Mapping[str, Any], steps: int | None) -> Saved:
-    """``model`` with its statistics, checked against the run's settings."""
+    """``model`` with its statistics, checked against the run's settings and loaded once, so
+    that a truncated or corrupt file is found here rather than halfway through a command.
+
+    :raises ValueError: a file is missing or cannot be loaded (saying which, and why).
+    """
     statistics = _statistics_of(model)
     if config["hyperparams"].get("normalize") and not statistics.exists():
         raise ValueError(f"{model} was trained on normalised observations but {statistics.name} "
                          "is missing beside it")
+    for path in (model, statistics) if statistics.exists() else (model,):
+        why = _unreadable(path)
+        if why is not None:
+            raise ValueError(f"{path} is unreadable ({why})")
     return Saved(model, statistics if statistics.exists() else None, run, steps)
+
+
+def _unreadable(path: Path) -> str | None:
+    """Why the saved model (``.zip``) or statistics (``.pkl``) ``path`` cannot be loaded; None
+    if it can."""
+    try:
+        if path.suffix != ".zip":
+            with open(path, "rb") as f:
+                pickle.load(f)
+            return None
+        with zipfile.ZipFile(path) as archive:
+            corrupt = archive.testzip()  # every member against its checksum
+        if corrupt is not None:
+            return f"{corrupt} in it is corrupt"
+        data, params, _ = load_from_zip_file(path, device="cpu", print_system_info=False)
+        if data is None or "policy" not in params:  # e.g. cut short: a zip inside it is found
+            return "not a whole Stable-Baselines3 model: no " + \
+                ("data" if data is None else "policy") + " in it"
+        return None
+    except Exception as error:  # whatever a damaged file raises (zip, torch, pickle) says why
+        return _one_line(error) or type(error).__name__
+
+
+def _first_loadable(run: Path, config: Mapping[str, Any],
+                    candidates: Sequence[tuple[Path, int | None]], reasons: list[str]) -> Saved:
+    """The first of ``candidates`` (model file, steps) that loads (:func:`_saved`); when it is
+    not the agent asked for, a :class:`FallbackWarning` says which it is and why (``reasons``,
+    and why each candidate before it was passed over).
+
+    :raises ValueError: none loads (saying why each did not).
+    """
+    for model, steps in candidates:
+        try:
+            saved = _saved(model, run, config, steps)
+        except ValueError as error:
+            reasons.append(str(error))
+            continue
+        if reasons:
+            what = "checkpoint " if model.parent.name == CHECKPOINTS else ""
+            count = "" if steps is None else f" ({steps} steps)"
+            warnings.warn(f"using {what}{model}{count}: {'; '.join(reasons)}", FallbackWarning,
+                          stacklevel=3)
+        return saved
+    if not reasons:
+        raise ValueError(f"{run} holds no model.zip and no checkpoint yet")
+    raise ValueError(f"{run} holds no loadable agent: {'; '.join(reasons)}")
 
 
 def checkpoints(run: Path) -> list[tuple[int, Path]]:
@@ -648,21 +1040,26 @@ def checkpoints(run: Path) -> list[tuple[int, Path]]:
 
 def find_agent(path: Path) -> Saved:
     """The agent that ``path`` names: a run folder (its ``model.zip``, else its latest
-    checkpoint: a run stopped before saving), or a model file (``model.zip``,
+    checkpoint that loads: a run stopped before saving, or whose file is truncated or
+    corrupt, with a :class:`FallbackWarning` saying so), or a model file (``model.zip``,
     ``last_model.zip`` or ``checkpoints/model_<N>_steps.zip``) of a run folder.
 
     :raises FileNotFoundError: no such file or folder.
-    :raises ValueError: a file that is not a saved model of a run, or a run without any.
+    :raises ValueError: a file that is not a saved model of a run or does not load, or a run
+        without any agent that loads.
     """
     path = Path(path)
     if path.is_dir():
         config = read_config(path)
-        if (path / "model.zip").exists():
-            return _saved(path / "model.zip", path, config, _final_steps(config, "model.zip"))
-        saved = checkpoints(path)
-        if not saved:
-            raise ValueError(f"{path} holds no model.zip and no checkpoint yet")
-        return _saved(saved[-1][1], path, config, saved[-1][0])
+        final = path / "model.zip"
+        found = [(p, steps) for steps, p in reversed(checkpoints(path))]
+        if final.exists():
+            return _first_loadable(path, config, [(final, _final_steps(config, final.name)),
+                                                  *found], [])
+        killed = " (its training is running, or was stopped before saving)" \
+            if config.get("status") == RUNNING else ""
+        return _first_loadable(path, config, found,
+                               [f"{path} has no model.zip{killed}"] if found else [])
     if not path.exists():
         raise FileNotFoundError(f"no such run folder or model file: {path}")
     run = path.parent.parent if path.parent.name == CHECKPOINTS else path.parent
@@ -685,20 +1082,26 @@ def _final_steps(config: Mapping[str, Any], name: str) -> int | None:
 
 
 def latest(run: Path) -> Saved:
-    """Where :func:`resume` continues ``run``: the last agent it saved, by step count (the
-    final or interrupted one, or a later checkpoint of a run that was killed).
+    """Where :func:`resume` continues ``run``: the last agent it saved that loads, by step
+    count (the final or interrupted one, or a later checkpoint of a run that was killed);
+    a :class:`FallbackWarning` says when that is not the run's final agent, and why.
 
-    :raises FileNotFoundError: ``run`` is not a run folder.  :raises ValueError: nothing saved.
+    :raises FileNotFoundError: ``run`` is not a run folder.
+    :raises ValueError: nothing saved, or nothing that loads.
     """
+    run = Path(run)
     config = read_config(run)
     candidates = [(steps, 1, path) for steps, path in checkpoints(run)]
-    last = Path(run) / ("last_model.zip" if config.get("validation") else "model.zip")
-    if config.get("status", COMPLETE) in (INTERRUPTED, COMPLETE) and last.exists():  # older: none
+    last = run / ("last_model.zip" if config.get("validation") else "model.zip")
+    ended = config.get("status", COMPLETE) in (INTERRUPTED, COMPLETE)
+    if ended and last.exists():  # else older than the checkpoints, if there at all
         candidates.append((int(config["timesteps"]), 2, last))  # the same steps: it wins
     if not candidates:
         raise ValueError(f"{run} holds no saved agent to resume from (no model, no checkpoint)")
-    steps, _, path = max(candidates)
-    return _saved(path, Path(run), config, steps)
+    reasons = [] if ended else [f"{run} was not saved at its end (its config.json says "
+                                f"{RUNNING!r}: it was killed, or stopped by an error)"]
+    return _first_loadable(run, config, [(path, steps) for steps, _, path in
+                                         sorted(candidates, reverse=True)], reasons)
 
 
 def resume(run: Path, timesteps: int | None = None, progress_bar: bool = True,
@@ -709,21 +1112,25 @@ def resume(run: Path, timesteps: int | None = None, progress_bar: bool = True,
     go on), to ``timesteps`` steps in all (default: the run's own target). An off-policy
     algorithm's replay buffer is not saved: it refills from the resumed policy.
 
+    :raises FileNotFoundError: ``run`` is not a run folder.
     :raises ValueError: nothing to resume from, or ``timesteps`` not beyond its steps.
+    :raises RunInUse: another training is writing ``run``.
     """
     run = Path(run)
-    saved = latest(run)
-    config = read_config(run)
-    target = int(config.get("target_timesteps", config.get("timesteps", 0))
-                 if timesteps is None else timesteps)
-    assert saved.timesteps is not None
-    if target <= saved.timesteps:
-        raise ValueError(f"{run} has trained {saved.timesteps} of {target} steps: nothing to "
-                         "resume; give --timesteps beyond it to train further")
-    config.update(status=RUNNING, target_timesteps=target,
-                  estimator=config.get("estimator") or RAW)
-    config.setdefault("checkpoint_every", max(1, math.ceil(target / 5 / config["n_envs"])))
-    return _run(config, run, saved, progress_bar, torch_threads)
+    read_config(run)  # a run folder: before the lock, which would make one
+    with run_lock(run):
+        saved = latest(run)
+        config = read_config(run)
+        target = int(config.get("target_timesteps", config.get("timesteps", 0))
+                     if timesteps is None else timesteps)
+        assert saved.timesteps is not None
+        if target <= saved.timesteps:
+            raise ValueError(f"{run} has trained {saved.timesteps} of {target} steps: nothing "
+                             "to resume; give --timesteps beyond it to train further")
+        config.update(status=RUNNING, target_timesteps=target,
+                      estimator=config.get("estimator") or RAW)
+        config.setdefault("checkpoint_every", max(1, math.ceil(target / 5 / config["n_envs"])))
+        return _run(config, run, saved, progress_bar, torch_threads)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -779,9 +1186,10 @@ def _environments(config: Mapping[str, Any], saved: Saved | None, params: Mappin
 def _run(config: dict[str, Any], out: Path, saved: Saved | None, progress_bar: bool,
          torch_threads: int | None) -> TrainResult:
     """Train (or go on training ``saved``) to ``config["target_timesteps"]``, save and
-    rewrite ``config.json``; Ctrl-C stops at the next step and saves the same way. The folder
-    is created (a new run's old files cleared) and ``config.json`` written once the
-    environments and the model are built: a setting they refuse leaves no trace."""
+    rewrite ``config.json``; SIGINT or SIGTERM stops at the next step and saves the same way.
+    A new run's old files are cleared and ``config.json`` written once the environments and
+    the model are built: a setting they refuse leaves no trace. The caller holds the lock of
+    ``out`` (:func:`run_lock`)."""
     algo, target = config["algo"], int(config["target_timesteps"])
     params, policy, normalize, normalize_kwargs, penalty, episodes = _algorithm_kwargs(config)
     venv = _environments(config, saved, params, normalize, normalize_kwargs, penalty)
@@ -802,41 +1210,86 @@ def _run(config: dict[str, Any], out: Path, saved: Saved | None, progress_bar: b
                                      custom_objects=schedules, tensorboard_log=tensorboard)
         model.num_timesteps = start
         model.set_random_seed(config["seed"] + start)
-    out.mkdir(parents=True, exist_ok=True)
-    _write_config(out, config)
-    with _SigintStops() as sigint:
-        keeper = _keeper(config, out, episodes, sigint)
+    with _StopSignals() as stop:  # from here on, a stop request saves the run
+        _write_config(out, config)
+        keeper = _keeper(config, out, episodes, stop)
         callbacks: list[BaseCallback] = [
-            CheckpointCallback(config["checkpoint_every"], str(out / CHECKPOINTS),
-                               name_prefix="model", save_vecnormalize=normalize),
-            _StopWhen(lambda: sigint.requested)]
+            _Checkpoints(config["checkpoint_every"], out / CHECKPOINTS),
+            _StopWhen(lambda: stop.requested)]
         if keeper is not None:
             callbacks.append(keeper)
         progress = _Progress(start, target) if progress_bar and _importable("tqdm") else None
         if progress is not None:
             callbacks.append(progress)
-        threads = torch.get_num_threads()
-        torch.set_num_threads(torch_threads or threads)
+        logger = configure_logger(0, tensorboard, type(model).__name__, saved is None)
+        model.set_logger(logger)  # SB3's own, as learn() would make it, but closed here
         began = time.perf_counter()
         try:
-            model.learn(target - start, callback=callbacks, reset_num_timesteps=saved is None)
+            with _torch_threads(torch_threads), _log_closed(logger, out / "tb"):
+                model.learn(target - start, callback=callbacks,
+                            reset_num_timesteps=saved is None)
         finally:
-            torch.set_num_threads(threads)
             if progress is not None:
                 progress.close(int(model.num_timesteps))
         wall = time.perf_counter() - began
-        stopped = sigint.requested
-    return _finish(model, venv, keeper, config, out, wall, start, stopped)
+        return _finish(model, venv, keeper, config, out, wall, start, stop.received)
 
 
-def _keeper(config: Mapping[str, Any], out: Path, episodes: int, sigint: _SigintStops
+@contextlib.contextmanager
+def _torch_threads(threads: int | None) -> Iterator[None]:
+    """Torch's intra-op threads set to ``threads`` for the block (None: left as they are)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads or before)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+@contextlib.contextmanager
+def _log_closed(logger: Logger, folder: Path) -> Iterator[None]:
+    """Close SB3's ``logger`` (its TensorBoard log is in ``folder``) when the block ends, and
+    report a write error of the log (a full disk) as one naming ``folder``: TensorBoard writes
+    in a thread of its own, whose error SB3's logger raises later without a file name (and
+    the thread prints its traceback, left out here: the error is reported once)."""
+    excepthook = threading.excepthook
+
+    def quiet(args: Any) -> None:
+        if not (isinstance(args.exc_value, OSError) and _from_tensorboard(args.exc_value)):
+            excepthook(args)
+
+    threading.excepthook = quiet
+    try:
+        try:
+            yield
+        except BaseException:
+            with contextlib.suppress(OSError):  # an error is on its way: one is enough
+                logger.close()
+            raise
+        logger.close()  # the last records written (or their error raised) here
+    except OSError as error:
+        if isinstance(error, WriteError) or not _from_tensorboard(error):
+            raise
+        raise WriteError(error.errno or errno.EIO, f"cannot write {folder}: "
+                         f"{error.strerror or error}", str(folder)) from error
+    finally:
+        threading.excepthook = excepthook
+
+
+def _from_tensorboard(error: BaseException) -> bool:
+    """Whether ``error`` was raised in TensorBoard's code."""
+    return any("tensorboard" in frame.f_code.co_filename
+               for frame, _ in traceback.walk_tb(error.__traceback__))
+
+
+def _keeper(config: Mapping[str, Any], out: Path, episodes: int, stop: _StopSignals
             ) -> KeepBest | None:
     """:class:`KeepBest` for the run (carrying on a resumed run's validations), or None."""
     if not episodes:
         return None
     keeper = KeepBest(config["env_id"], config["estimator"], episodes,
                       config["checkpoint_every"], out, config["max_episode_steps"],
-                      stopped=lambda: sigint.requested)
+                      stopped=lambda: stop.requested)
     validation = config.get("validation") or {}
     keeper.history = list(validation.get("history", []))
     keeper.best = validation.get("selected")
@@ -844,24 +1297,20 @@ def _keeper(config: Mapping[str, Any], out: Path, episodes: int, sigint: _Sigint
 
 
 def _finish(model: BaseAlgorithm, venv: VecEnv, keeper: KeepBest | None,
-            config: dict[str, Any], out: Path, wall: float, start: int, stopped: bool
-            ) -> TrainResult:
+            config: dict[str, Any], out: Path, wall: float, start: int,
+            stop_signal: int | None) -> TrainResult:
     """Save the agent (model.zip, or last_model.zip beside KeepBest's choice) and its
     statistics, and write the final ``config.json``."""
     steps = int(model.num_timesteps)
     last = "" if keeper is None else "last_"  # model.zip is then KeepBest's choice
-    model.save(out / f"{last}model.zip")
-    normalizer = model.get_vec_normalize_env()
-    if normalizer is not None:
-        normalizer.save(str(out / f"{last}vecnormalize.pkl"))
+    _save_agent(model, out / f"{last}model.zip", out / f"{last}vecnormalize.pkl")
     if keeper is not None and not (out / "model.zip").exists():
         # stopped before the first validation: the last agent is all there is
-        shutil.copyfile(out / "last_model.zip", out / "model.zip")
-        if normalizer is not None:
-            shutil.copyfile(out / "last_vecnormalize.pkl", out / "vecnormalize.pkl")
+        _save_agent(model, out / "model.zip", out / "vecnormalize.pkl")
     result = TrainResult(out, steps, wall, (steps - start) / max(wall, 1e-9),
-                         None if keeper is None else keeper.best, stopped, start)
-    config.update(status=INTERRUPTED if stopped else COMPLETE, timesteps=steps,
+                         None if keeper is None else keeper.best, stop_signal is not None,
+                         start, stop_signal)
+    config.update(status=COMPLETE if stop_signal is None else INTERRUPTED, timesteps=steps,
                   wall_seconds=float(config.get("wall_seconds", 0.0)) + wall,
                   steps_per_second=result.steps_per_second)
     if keeper is not None:
@@ -924,12 +1373,16 @@ def load_agent(path: Path) -> Agent:
 
 
 def evaluate(out: Path, episodes: int = 5, seed: int = 0,
-             progress: Callable[[int], None] | None = None) -> list[dict[str, float]]:
+             progress: Callable[[int], None] | None = None, torch_threads: int | None = 1
+             ) -> list[dict[str, float]]:
     """Score the agent saved in ``out`` (a run folder, a checkpoint or a model file of it) on
     ``episodes`` episodes of seeds ``seed, seed + 1, ...``, behind its training estimator
     (:func:`agents.evaluation.evaluate`).
 
     :param progress: called with the number of steps done since its last call.
+    :param torch_threads: torch's intra-op threads meanwhile (None: leave as is); one, as in
+        :func:`train`: two USV episodes took 16 s with torch's two threads, 2.9 s with one, on
+        a loaded 2-core machine.
     :return: one row of :func:`~agents.evaluation.episode_metrics` per episode (cost,
         failures, RMS errors, actuator usage, estimation errors), with its ``seed``.
     """
@@ -937,7 +1390,8 @@ def evaluate(out: Path, episodes: int = 5, seed: int = 0,
         raise ValueError(f"episodes={episodes!r} is invalid: an integer >= 1")
     agent = load_agent(out)
     config = agent.config
-    return evaluation.evaluate(config["env_id"], lambda venv: agent,
-                               config["estimator"] or RAW, range(seed, seed + episodes),
-                               max_episode_steps=config.get("max_episode_steps"),
-                               progress=progress)
+    with _torch_threads(torch_threads):
+        return evaluation.evaluate(config["env_id"], lambda venv: agent,
+                                   config["estimator"] or RAW, range(seed, seed + episodes),
+                                   max_episode_steps=config.get("max_episode_steps"),
+                                   progress=progress)

@@ -125,6 +125,10 @@ def test_validation_keeps_the_best_agent_and_the_last(tmp_path):
     ({"env_id": "marine_envs/Nope-v0"}, "USV-v0"),
     ({"hyperparams": {"validation_episodes": -1}}, "validation_episodes"),
     ({"hyperparams": {"learning_rate": "lin_fast"}}, "lin_3e-4"),
+    ({"hyperparams": {"n_step": 64}}, r"hyperparams: unknown setting 'n_step' \(did you mean "
+                                      r"'n_steps'\?\)"),
+    ({"hyperparams": {"batch_size": 0}}, "hyperparams: batch_size=0 is invalid: an integer >= 1"),
+    ({"hyperparams": {"normalize": "maybe"}}, "normalize='maybe' is invalid"),
 ])
 def test_bad_input_is_refused(tmp_path, kwargs, message):
     args = {"env_id": USV, "out": tmp_path, "progress_bar": False, **kwargs}

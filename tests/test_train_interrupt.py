@@ -16,11 +16,11 @@ import pytest
 from agents.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
-#: A small PPO: a checkpoint within a second or two of learning, five in the whole run.
+#: A small PPO: a checkpoint within a few seconds of learning (2000 steps), five in the run.
 TINY = """\
 default:
   ppo:
-    n_timesteps: 50000
+    n_timesteps: 10000
     n_envs: 2
     policy: MlpPolicy
     normalize: true
@@ -32,7 +32,13 @@ default:
 """
 
 
+#: How long to wait for an event of the training process (s): generous, for a loaded machine
+#: (a fixed 30 s failed twice at a load of 9-12); the test goes on as soon as the event happens.
+PATIENCE = 300.0
+
+
 def _wait_for(condition, timeout: float, what: str) -> None:
+    """Poll ``condition`` until it holds; fail after ``timeout`` seconds."""
     deadline = time.monotonic() + timeout
     while not condition():
         if time.monotonic() > deadline:
@@ -54,9 +60,9 @@ def interrupted(tmp_path_factory):
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     try:
         _wait_for(lambda: any((run / "checkpoints").glob("model_*_steps.zip"))
-                  or process.poll() is not None, 30, "checkpoint")
+                  or process.poll() is not None, PATIENCE, "checkpoint")
         process.send_signal(signal.SIGINT)
-        out, err = process.communicate(timeout=30)
+        out, err = process.communicate(timeout=PATIENCE)
     finally:
         process.kill()
     return run, process.returncode, out, err
@@ -71,8 +77,8 @@ def test_ctrl_c_saves_the_run_and_says_so_in_one_line(interrupted):
                              rf"\(continue: marine train --resume {run}\)", line)[1])
     config = json.loads((run / "config.json").read_text())
     assert config["status"] == "interrupted" and config["timesteps"] == steps
-    assert config["estimator"] == "raw" and config["target_timesteps"] == 50_000
-    assert 0 < steps < 50_000
+    assert config["estimator"] == "raw" and config["target_timesteps"] == 10_000
+    assert 0 < steps < 10_000
     assert (run / "model.zip").exists() and (run / "vecnormalize.pkl").exists()
 
 
