@@ -1,5 +1,6 @@
 """``marine simulate``: record an episode of any environment in the recording format, in
-memory (:func:`simulate`) or streamed to a file as it runs (:func:`record`)."""
+memory (:func:`~agents.simulate.simulate`) or streamed to a file as it runs
+(:func:`~agents.simulate.record`)."""
 
 from __future__ import annotations
 

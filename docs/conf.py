@@ -73,8 +73,8 @@ nitpicky = True
 nitpick_ignore_regex = [
     (r"py:.*", r"(np|numpy|numpy\.typing|npt|gym|gymnasium|torch|scipy|pandas|pd|matplotlib|plt"
                r"|stable_baselines3|sb3_contrib|ray|cvxpy|numba|yaml|rich|tqdm|pyarrow)(\..*)?"),
-    (r"py:.*", r"(typing|collections|collections\.abc|pathlib|os|io|dataclasses|enum|abc|types"
-               r"|argparse|contextlib|concurrent|threading|signal)\..*"),
+    # the standard library (its modules, and what they define)
+    (r"py:.*", rf"({'|'.join(sorted(sys.stdlib_module_names))})(\..*)?"),
     (r"py:class", r"(Any|Callable|Iterator|Iterable|Mapping|Sequence|Path|PathLike|NDArray"
                   r"|ArrayLike|DTypeLike|Self|Unpack|TypedDict|Literal|Optional|Union|Generator"
                   r"|ndarray|array|float|int|str|bool|None|optional|callable|array_like"
