@@ -22,23 +22,44 @@ so an actuator effect is inside the recorded input and no diagnosis could see it
 
     python benchmarks/env_recordings.py [--vehicles usv,rov] [--seeds 0,1] [--dither 0]
                                         [--instrumented [--ideal]] [--json out.json]
+                                        [--docs [PAGE]]
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import time
-from collections.abc import Sequence
-from dataclasses import asdict
+import os
+import sys
 
-import numpy as np
-from tqdm import tqdm
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # _common, also under pytest
 
-from agents.simulate import simulate
-from estimators.diagnosis.cases import Case, build_effect, run_case, summarize
-from estimators.diagnosis.synthetic import DEFAULT_DITHER_SHARE, DITHER_SHARE
-from marine_envs.models.effects import Effect
+import argparse  # noqa: E402
+import time  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from dataclasses import asdict  # noqa: E402
+
+import numpy as np  # noqa: E402
+from _common import add_docs_option, benchmark_run, check_page_path  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+from agents.simulate import simulate  # noqa: E402
+from estimators.diagnosis.cases import Case, build_effect, run_case, summarize  # noqa: E402
+from estimators.diagnosis.synthetic import DEFAULT_DITHER_SHARE, DITHER_SHARE  # noqa: E402
+from marine_envs.files import write_json  # noqa: E402
+from marine_envs.models.effects import Effect  # noqa: E402
+
+TITLE = "Diagnosis of recordings made by the environments"
+ABOUT = """\
+The mismatch diagnosis on recordings made by the environments themselves, a second source of
+recordings besides the diagnosis's own generator: each case hides one catalogue effect in the
+environment (`gym.make(ENV_ID, effects=[...])`, sized at strength 0.3 as in the acceptance
+set), records 300 s of a closed-loop identification experiment (`agents.simulate`, LQR with a
+random-step dither on every input) with the environment's own sea, sensors and autopilot, and
+diagnoses the record against the nominal model with the default settings. Each case is scored
+as the acceptance set is: the effect and target ranked first, its key parameter within 30 %,
+and no confident finding on an effect-free record. Nothing in the diagnosis was tuned on these
+cases; seeds 0 and 1 were looked at while it was built, seeds 2 and 3 are held out. Only state
+effects and sensor biases: an actuator effect is inside the recorded applied input, where no
+diagnosis could see it."""
 
 #: Vehicle -> environment id and the effects hidden in it (effect, target, extra parameters).
 #: Not the DP vessel: its LQR needs the low-frequency position, which its sensors do not give
@@ -102,7 +123,20 @@ def run(env_id: str, case: Case, dither: float | None = None, instrumented: bool
     return run_case(case, recording)
 
 
+def format_outcomes(outcomes: Sequence) -> str:
+    """One Markdown row per case."""
+    lines = ["| case | found (confidence) | improvement | right | key parameter | s |",
+             "| --- | --- | ---: | --- | --- | ---: |"]
+    for o in outcomes:
+        found = ", ".join(f"{f} ({c:.2f})" for f, c in zip(o.found, o.confidences, strict=True))
+        improvement = "-" if o.improvement is None else f"{o.improvement:.0%}"
+        lines.append(f"| {o.case} | {found or o.reason[:60] or 'none'} | {improvement} | "
+                     f"{o.ranked_right} | {o.parameter_ok} | {o.seconds:.1f} |")
+    return "\n".join(lines)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--vehicles", default=",".join(VEHICLES),
@@ -118,6 +152,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--ideal", action="store_true",
                         help="with --instrumented: record them exactly")
     parser.add_argument("--json", metavar="OUT", help="write every outcome as JSON")
+    add_docs_option(parser, "env_recordings")
     args = parser.parse_args(argv)
     vehicles = [v.strip() for v in args.vehicles.split(",") if v.strip()]
     unknown = sorted(set(vehicles) - set(VEHICLES))
@@ -125,26 +160,23 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"unknown vehicle(s) {unknown}; choose from {', '.join(VEHICLES)}")
     if args.ideal and not args.instrumented:
         parser.error("--ideal goes with --instrumented")
+    check_page_path(parser, args.docs)
     seeds = [int(s) for s in args.seeds.split(",")]
-    start = time.perf_counter()
-    outcomes = [run(env_id, case, args.dither, args.instrumented, args.ideal)
-                for env_id, case in tqdm(cases(vehicles, seeds), desc="diagnosing", unit="case")]
-    print("| case | found (confidence) | improvement | right | key parameter | s |")
-    print("| --- | --- | ---: | --- | --- | ---: |")
-    for o in outcomes:
-        found = ", ".join(f"{f} ({c:.2f})" for f, c in zip(o.found, o.confidences, strict=True))
-        improvement = "-" if o.improvement is None else f"{o.improvement:.0%}"
-        print(f"| {o.case} | {found or o.reason[:60] or 'none'} | {improvement} | "
-              f"{o.ranked_right} | {o.parameter_ok} | {o.seconds:.1f} |")
-    rates = summarize(outcomes)
-    print()
-    for name, entry in rates.items():
-        print(f"{name}: {entry}")
-    print(f"\n{len(outcomes)} cases in {time.perf_counter() - start:.0f} s")
+    with benchmark_run("env_recordings", argv) as bench:
+        outcomes = [run(env_id, case, args.dither, args.instrumented, args.ideal)
+                    for env_id, case in tqdm(cases(vehicles, seeds), desc="diagnosing",
+                                             unit="case")]
+        bench.show(format_outcomes(outcomes), f"Seeds {', '.join(map(str, seeds))}")
+        rates = summarize(outcomes)
+        print()
+        bench.show("\n".join(f"{name}: {entry}" for name, entry in rates.items()), "Rates",
+                   markdown=False)
+        print(f"\n{len(outcomes)} cases in {time.perf_counter() - bench.started:.0f} s")
     if args.json:
-        with open(args.json, "w") as out:
-            json.dump({"outcomes": [asdict(o) for o in outcomes], "rates": rates}, out,
-                      indent=2, default=str)
+        write_json(args.json, {"outcomes": [asdict(o) for o in outcomes], "rates": rates},
+                   default=str)
+    if args.docs:
+        bench.write_page(args.docs, TITLE, ABOUT)
     return 0
 
 

@@ -10,24 +10,39 @@ a crash ends the cost early, so its cost alone would flatter it.
     python benchmarks/rl_vs_lqr.py [--envs USV Hydrofoil] [--algo ppo] [--estimator kf]
                                    [--lqr-estimator kf] [--episodes 10] [--timesteps N] [--seed 0]
                                    [--out runs/rl_vs_lqr]
-                                   [--evaluate-only] [--json out.json]
+                                   [--evaluate-only] [--json out.json] [--docs [PAGE]]
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-from pathlib import Path
-from typing import Any
+import os
+import sys
 
-import numpy as np
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # _common, also under pytest
 
-from agents import evaluation, sb3
-from marine_envs import ENVIRONMENTS
+import argparse  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+from _common import add_docs_option, benchmark_run, check_page_path  # noqa: E402
+
+from agents import evaluation, sb3  # noqa: E402
+from marine_envs import ENVIRONMENTS  # noqa: E402
+from marine_envs.files import write_json  # noqa: E402
 
 SHORT = {env_id.split("/")[1].removesuffix("-v0"): env_id for env_id in ENVIRONMENTS}
 FIRST_SEED = 1000  # of the evaluation episodes; training boats start from seeds seed, ...
 TOLERANCE = 1.25  # the issue's "within 25 % of LQR"
+TITLE = "RL against LQR on the same estimate"
+ABOUT = """\
+An SB3 agent trained with the YAML's settings (`agents/hyperparams.yaml`) behind an estimator,
+then scored with the task's LQR behind the same estimator (or the one given) on the same
+evaluation seeds (1000 onwards) and full registered episodes (`agents.evaluation.evaluate`).
+The table gives the training steps and wall time, each controller's cost (mean ± std over the
+episodes) and failed episodes, and the ratio of mean costs RL / LQR. An agent with a failed
+episode does not pass, whatever its cost: a crash ends the cost early."""
 
 
 def _cost(rows: list[dict[str, Any]]) -> tuple[float, float, int]:
@@ -60,20 +75,24 @@ def compare(env_id: str, algo: str, estimator: str, episodes: int, out: Path,
             "within_25_percent": rl[2] == 0 and ratio <= TOLERANCE}
 
 
-def print_table(rows: list[dict[str, Any]]) -> None:
-    print("| env | agent | estimator | seed | training steps | wall time | episodes | RL cost | "
-          "RL failed | LQR behind | LQR cost | LQR failed | RL / LQR | within 25 % |")
-    print("|---|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---|")
+def format_table(rows: list[dict[str, Any]]) -> str:
+    """The rows as a Markdown table."""
+    lines = ["| env | agent | estimator | seed | training steps | wall time | episodes | RL cost "
+             "| RL failed | LQR behind | LQR cost | LQR failed | RL / LQR | within 25 % |",
+             "|---|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|---|"]
     for r in rows:
-        print(f"| {r['env']} | {r['agent']} | {r['estimator']} | {r['seed']} | {r['timesteps']} | "
-              f"{r['wall_seconds']:.0f} s | {r['episodes']} | "
-              f"{r['rl_cost']:.0f} ± {r['rl_std']:.0f} | {r['rl_failed']} | "
-              f"{r['lqr_estimator']} | {r['lqr_cost']:.0f} ± {r['lqr_std']:.0f} | "
-              f"{r['lqr_failed']} | "
-              f"{r['ratio']:.2f} | {'yes' if r['within_25_percent'] else 'no'} |")
+        lines.append(
+            f"| {r['env']} | {r['agent']} | {r['estimator']} | {r['seed']} | {r['timesteps']} | "
+            f"{r['wall_seconds']:.0f} s | {r['episodes']} | "
+            f"{r['rl_cost']:.0f} ± {r['rl_std']:.0f} | {r['rl_failed']} | "
+            f"{r['lqr_estimator']} | {r['lqr_cost']:.0f} ± {r['lqr_std']:.0f} | "
+            f"{r['lqr_failed']} | "
+            f"{r['ratio']:.2f} | {'yes' if r['within_25_percent'] else 'no'} |")
+    return "\n".join(lines)
 
 
-def main() -> None:
+def main(argv: Sequence[str] | None = None) -> None:
+    argv = list(sys.argv[1:] if argv is None else argv)
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--envs", nargs="+", default=["USV", "Hydrofoil"], choices=sorted(SHORT))
@@ -92,7 +111,8 @@ def main() -> None:
     parser.add_argument("--evaluate-only", action="store_true",
                         help="score the agents already in --out instead of training them")
     parser.add_argument("--json", metavar="PATH", help="also write the rows as JSON")
-    args = parser.parse_args()
+    add_docs_option(parser, "rl_vs_lqr")
+    args = parser.parse_args(argv)
     named = [name for name in sb3.estimator_choices() if name is not None]
     for option, name in (("--estimator", args.estimator), ("--lqr-estimator", args.lqr_estimator)):
         if name is not None and name not in named:
@@ -104,13 +124,18 @@ def main() -> None:
     missing = [str(d) for d in dirs.values() if not (d / "config.json").exists()]
     if args.evaluate_only and missing:
         parser.error(f"--evaluate-only: no trained agent in {', '.join(missing)}")
-    rows = [compare(SHORT[name], args.algo, args.estimator, args.episodes, path,
-                    args.timesteps, args.seed, train=not args.evaluate_only,
-                    lqr_estimator=args.lqr_estimator)
-            for name, path in dirs.items()]
-    print_table(rows)
+    check_page_path(parser, args.docs)
+    with benchmark_run("rl_vs_lqr", argv) as bench:
+        rows = [compare(SHORT[name], args.algo, args.estimator, args.episodes, path,
+                        args.timesteps, args.seed, train=not args.evaluate_only,
+                        lqr_estimator=args.lqr_estimator)
+                for name, path in dirs.items()]
+        bench.show(format_table(rows), f"{args.algo} behind {args.estimator}, training seed "
+                   f"{args.seed}")
     if args.json:
-        Path(args.json).write_text(json.dumps({"rows": rows}, indent=2) + "\n")
+        write_json(args.json, {"rows": rows})
+    if args.docs:
+        bench.write_page(args.docs, TITLE, ABOUT)
 
 
 if __name__ == "__main__":

@@ -18,27 +18,46 @@ are the ones the bank's memory (120 s) was looked at on; the held-out seas were 
 choose anything. The hydrofoil's registered sea changes during the episode (Hs 0.1 -> 0.3 ->
 0.15 m): ``docs/sea_estimate.png`` shows the bank following it.
 
-    python benchmarks/sea_estimate.py [--boats 8] [--seconds 600] [--json out.json]
+    python benchmarks/sea_estimate.py [--boats 8] [--seconds 600] [--json out.json] [--docs [PAGE]]
                                       [--no-plot | --plot-only]
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-from pathlib import Path
-from typing import Any
+import os
+import sys
 
-import gymnasium as gym
-import numpy as np
-from tqdm import tqdm
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # _common, also under pytest
 
-import marine_envs  # noqa: F401  (registers the environments)
-from agents import evaluation
-from agents.lqr import LQRPolicy
-from estimators import registry
-from estimators.disturbance import disturbance_filter, disturbance_model
-from estimators.sea_bank import vehicle_options
+import argparse  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+from _common import Run, add_docs_option, benchmark_run, check_page_path  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+import marine_envs  # noqa: E402, F401  (registers the environments)
+from agents import evaluation  # noqa: E402
+from agents.lqr import LQRPolicy  # noqa: E402
+from estimators import registry  # noqa: E402
+from estimators.disturbance import disturbance_filter, disturbance_model  # noqa: E402
+from estimators.sea_bank import vehicle_options  # noqa: E402
+from marine_envs.files import write_json  # noqa: E402
+
+TITLE = "The sea estimated online"
+ABOUT = """How well the bank of sea filters (`kf_sea`, `estimators.sea_bank`) estimates a sea it
+was not told, against the Kalman filter of the episode's own sea (`kf`) and the one of the
+vehicle's design sea. On seas that are neither the design sea nor on the bank's grid, a batch
+of boats of each vehicle runs under LQR (state feedback on the estimate, the same design behind
+every filter). The table gives the wave channel's peak frequency each filter works with (the
+bank's: its weighted estimate over the last third of the run, median over boats, and its worst
+boat), the estimation error weighted by the task's state weights
+(`sqrt(mean (x_hat - x)' Q (x_hat - x))`) and the mean LQR cost. The tuning seas are the ones
+the bank's memory (120 s) was chosen on; the held-out seas chose nothing. The figure follows
+the hydrofoil's registered sea, whose Hs ramps 0.1 -> 0.3 -> 0.15 m."""
 
 # (vehicle, peak period s or None for the one-parameter PM, Hs m): none is the design sea
 # (USV: Tp 8 s, Hs 2 m; hydrofoil: the PM of Hs 0.3 m, Tp 2.75 s) nor on the bank's grid
@@ -112,20 +131,23 @@ def case(vehicle: str, tp: float | None, hs: float, boats: int, seconds: float, 
                for key in ("cost", "error", "failed")}}
 
 
-def print_table(rows: list[dict[str, Any]]) -> None:
-    print("| set | vehicle | sea (Tp s, Hs m) | peak: true | design sea | kf_sea (error median, "
-          "worst boat) | estimation error kf / design / kf_sea | LQR cost kf / design / kf_sea |")
-    print("|---|---|---|---:|---:|---:|---:|---:|")
+def format_table(rows: list[dict[str, Any]]) -> str:
+    """The rows as a Markdown table."""
+    lines = ["| set | vehicle | sea (Tp s, Hs m) | peak: true | design sea | kf_sea (error "
+             "median, worst boat) | estimation error kf / design / kf_sea | LQR cost kf / "
+             "design / kf_sea |", "|---|---|---|---:|---:|---:|---:|---:|"]
     for r in rows:
-        print(f"| {r['split']} | {r['vehicle']} | {r['tp']}, {r['hs']} | {r['peak_true']:.2f} | "
-              f"{r['peak_design']:.2f} ({r['peak_design'] / r['peak_true'] - 1:+.0%}) | "
-              f"{r['peak_estimated']:.2f} ({r['peak_error_median']:.0%}, "
-              f"{r['peak_error_worst']:.0%}) | {r['kf_error']:.3g} / "
-              f"{r['kf_design_sea_error']:.3g} / {r['kf_sea_error']:.3g} | "
-              f"{r['kf_cost']:.0f} / {r['kf_design_sea_cost']:.0f} / {r['kf_sea_cost']:.0f} |")
+        lines.append(
+            f"| {r['split']} | {r['vehicle']} | {r['tp']}, {r['hs']} | {r['peak_true']:.2f} | "
+            f"{r['peak_design']:.2f} ({r['peak_design'] / r['peak_true'] - 1:+.0%}) | "
+            f"{r['peak_estimated']:.2f} ({r['peak_error_median']:.0%}, "
+            f"{r['peak_error_worst']:.0%}) | {r['kf_error']:.3g} / "
+            f"{r['kf_design_sea_error']:.3g} / {r['kf_sea_error']:.3g} | "
+            f"{r['kf_cost']:.0f} / {r['kf_design_sea_cost']:.0f} / {r['kf_sea_cost']:.0f} |")
+    return "\n".join(lines)
 
 
-def plot_changing_sea(boats: int, path: Path) -> None:
+def plot_changing_sea(boats: int, bench: Run, path: Path = FIGURE) -> None:
     """The hydrofoil's registered sea (Hs 0.1 -> 0.3 -> 0.15 m over 600 s): the bank's peak
     estimate per boat against the peak of the sea of each moment's Hs."""
     import matplotlib
@@ -150,11 +172,13 @@ def plot_changing_sea(boats: int, path: Path) -> None:
            title="Hydrofoil: the sea's peak estimated online as Hs goes 0.1 -> 0.3 -> 0.15 m")
     ax.legend(loc="upper right")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    print(f"wrote {path}")
+    bench.figure(fig, path, "The hydrofoil's changing sea, its peak estimated online by each "
+                 "boat's bank (blue) against the peak of the sea of each moment (black)", dpi=120)
+    plt.close(fig)
 
 
-def main() -> None:
+def main(argv: Sequence[str] | None = None) -> None:
+    argv = list(sys.argv[1:] if argv is None else argv)
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--boats", type=int, default=8, help="boats per sea (default 8)")
@@ -163,21 +187,25 @@ def main() -> None:
     parser.add_argument("--json", metavar="PATH", help="also write the rows as JSON")
     parser.add_argument("--no-plot", action="store_true", help="skip docs/sea_estimate.png")
     parser.add_argument("--plot-only", action="store_true", help="only docs/sea_estimate.png")
-    args = parser.parse_args()
+    add_docs_option(parser, "sea_estimate")
+    args = parser.parse_args(argv)
     if args.boats < 1 or not args.seconds > 0:
         parser.error("--boats must be >= 1 and --seconds > 0")
-    if args.plot_only:
-        plot_changing_sea(args.boats, FIGURE)
-        return
-    cases = [(*c, TUNING_SEED, "tuning") for c in TUNING] + \
-            [(*c, HELD_OUT_SEED, "held out") for c in HELD_OUT]
-    rows = [case(v, tp, hs, args.boats, args.seconds, seed, split)
-            for v, tp, hs, seed, split in tqdm(cases, desc="seas", unit="sea")]
-    print_table(rows)
+    check_page_path(parser, args.docs)
+    with benchmark_run("sea_estimate", argv) as bench:
+        rows = []
+        if not args.plot_only:
+            cases = [(*c, TUNING_SEED, "tuning") for c in TUNING] + \
+                    [(*c, HELD_OUT_SEED, "held out") for c in HELD_OUT]
+            rows = [case(v, tp, hs, args.boats, args.seconds, seed, split)
+                    for v, tp, hs, seed, split in tqdm(cases, desc="seas", unit="sea")]
+            bench.show(format_table(rows), f"{args.boats} boats per sea, {args.seconds:g} s each")
+        if not args.no_plot:
+            plot_changing_sea(args.boats, bench)
     if args.json:
-        Path(args.json).write_text(json.dumps({"rows": rows}, indent=2) + "\n")
-    if not args.no_plot:
-        plot_changing_sea(args.boats, FIGURE)
+        write_json(args.json, {"rows": rows})
+    if args.docs:
+        bench.write_page(args.docs, TITLE, ABOUT)
 
 
 if __name__ == "__main__":
