@@ -218,6 +218,7 @@ class LQRPolicy:
 
         :param q, r: diagonal state and input weights (unweighted disturbance states: 0).
         :param x_ref: reference of every state (disturbance states: 0, their mean).
+
         Other parameters as :meth:`for_model`.
         """
         K = dlqr_gain(F, G, q, r, discount)

@@ -396,6 +396,7 @@ class AdaptiveKalmanFilter(KalmanFilter):
     :param Q, Q_max: the two process-noise covariances ``Q_min`` and ``Q_max`` (the hydrofoil AKF
         paper: WQmin = diag(1, 1, 0.3, 0.3), WQmax = diag(10, 10, 3, 3)).
     :param upper_quantile, lower_quantile: the thresholds' chi-square probabilities.
+
     Other parameters as :class:`KalmanFilter`.
 
     ``fired`` ``(N,)`` says whose statistic exceeded the upper threshold at the last update, and

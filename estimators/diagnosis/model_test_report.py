@@ -1,9 +1,9 @@
 """The report of a model-test diagnosis (free simulation, :mod:`.model_test`).
 
-:func:`.report.write_report` hands a diagnosis with a ``comparison`` to this module: its figures
-(:mod:`.model_test_figures`) and the text of ``report.md``: verdict, model check, calibrated
-parameters, findings (with each equation's standard form), held-out free simulation,
-alternatives, what is left unexplained, the figures and how to read them.
+:func:`~estimators.diagnosis.report.write_report` hands a diagnosis with a ``comparison`` to this
+module: its figures (:mod:`.model_test_figures`) and the text of ``report.md``: verdict, model
+check, calibrated parameters, findings (with each equation's standard form), held-out free
+simulation, alternatives, what is left unexplained, the figures and how to read them.
 """
 
 from __future__ import annotations

@@ -5,10 +5,10 @@ fit.
   measurements) regressed on ``d rhs / d theta``; exact in one step for parameters in which
   ``rhs`` is affine, Gauss-Newton otherwise. Needs no initial guess of the parameters, but every
   state the fitted equations use must be measured.
-* ``method="output_error"`` (:mod:`.output_error`): simulated outputs fitted to the measured ones
-  (``scipy.optimize.least_squares``), initial states included. The maximum-likelihood fit when
-  the only noise is the sensors', but one simulation of every segment per parameter and
-  iteration.
+* ``method="output_error"`` (:mod:`estimators.identification.output_error`): simulated outputs
+  fitted to the measured ones (``scipy.optimize.least_squares``), initial states included. The
+  maximum-likelihood fit when the only noise is the sensors', but one simulation of every
+  segment per parameter and iteration.
 """
 
 from __future__ import annotations

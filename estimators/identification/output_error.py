@@ -1,6 +1,6 @@
 """Output-error fit: simulated outputs fitted to the measured ones (initial states included) by
 ``scipy.optimize.least_squares``, the simulations of all segments and parameter perturbations
-batched in one pass over time (:class:`_Simulation`).
+batched in one pass over time (``_Simulation``).
 """
 
 from __future__ import annotations
