@@ -17,6 +17,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # the packages themselves, installed or not
 os.environ.setdefault("MPLBACKEND", "Agg")
+os.environ.setdefault("MARINE_ENVS_QUIET", "1")  # no first-use compile note in the pages
 
 import marine_envs  # noqa: E402
 
