@@ -96,3 +96,25 @@ def test_the_api_reference_lists_every_public_class_and_function(built_site: Pat
     assert checked > 500, f"only {checked} public classes and functions found: enumeration broke"
     assert not missing, (f"{len(missing)} of {checked} public classes and functions are not in "
                          "the API reference:\n" + "\n".join(missing))
+
+
+#: What a figure's record must hold (marine_envs.provenance.run_record).
+FIELDS = ("command", "commit", "date", "machine")
+#: Folders a local docs build writes (not the project's figures).
+BUILT = {"_build", "jupyter_execute", "generated"}
+
+
+def test_every_figure_of_the_docs_names_the_run_that_made_it() -> None:
+    """Each PNG in docs/ (the README's figure among them) carries the command, commit, date and
+    machine of its run, written by marine_envs.provenance.save_figure."""
+    from marine_envs.provenance import read_figure_provenance
+
+    figures = sorted(path for path in (ROOT / "docs").rglob("*.png")
+                     if not BUILT & set(path.relative_to(ROOT).parts))
+    assert figures, "no figures found under docs/"
+    missing = [f"{path.relative_to(ROOT)}: {sorted(set(FIELDS) - set(record))}"
+               for path in figures
+               for record in [read_figure_provenance(path)] if not set(FIELDS) <= set(record)]
+    assert not missing, "figures without their run's record (regenerate them with the " \
+        "script that made them):\n" + "\n".join(missing)
+
