@@ -19,7 +19,7 @@ of every compiled function it reaches (globals by name, closure cells), recursiv
 First use: a vehicle's kernels take seconds to compile when the disk cache does not hold them.
 Code that may compile them runs inside :func:`first_use`; the first time the cache misses in
 there, the user is told on stderr, once per vehicle and process ("compiling the USV kernels
-(first use, ~5 s)"), unless the environment variable ``MARINE_ENVS_QUIET`` is set (to anything
+(first use, 5-10 s)"), unless the environment variable ``MARINE_ENVS_QUIET`` is set (to anything
 but "" or "0"). stderr, not :mod:`warnings` or :mod:`logging`: it is a note of progress,
 nothing to fix (a warning made an error by ``-W error`` would fail a run on a cold cache only),
 and it must show without a logging configuration (INFO is hidden by default); stdout stays the
@@ -116,7 +116,7 @@ def _announce() -> None:
     vehicle = _USING.get()
     if vehicle is not None and vehicle not in _ANNOUNCED and not _quiet():
         _ANNOUNCED.add(vehicle)
-        print(f"compiling the {vehicle} kernels (first use, ~5 s)", file=sys.stderr, flush=True)
+        print(f"compiling the {vehicle} kernels (first use, 5-10 s)", file=sys.stderr, flush=True)
 
 
 def _quiet() -> bool:
