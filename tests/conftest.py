@@ -6,8 +6,3 @@ import os
 # on a cold numba cache only (tests/test_first_use.py checks the note with this unset)
 os.environ["MARINE_ENVS_QUIET"] = "1"
 
-
-def pytest_collection_modifyitems(items):
-    """The documentation build (minutes, one worker) first, so the other worker runs the rest
-    of the suite beside it instead of after it."""
-    items.sort(key=lambda item: not item.nodeid.startswith("tests/test_docs.py"))
