@@ -7,6 +7,7 @@ number or a plot can always be traced to the run that made it.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import os
 import platform
@@ -42,7 +43,8 @@ def run_record(command: str | None = None) -> dict[str, str]:
 
     :param command: the command line to record; by default this process's own arguments.
     :return: ``command``, ``version`` (the package's), ``commit`` (the git commit of the
-        checkout, ``+dirty`` when its code or data has uncommitted changes, ``unknown`` outside a checkout),
+        checkout, ``+dirty`` when its code or data has uncommitted changes, ``unknown``
+        outside a checkout),
         ``date`` (UTC, ISO 8601), ``machine`` (:func:`machine_description`) and ``load``
         (the 1-minute load average when the run started its record).
     """
@@ -99,12 +101,10 @@ def read_figure_provenance(path: str | os.PathLike[str]) -> dict[str, str]:
 
 
 def _cpu_model() -> str:
-    try:
+    with contextlib.suppress(OSError):  # not Linux: the platform's own word
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("model name"):
                 return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
     return platform.processor() or platform.machine()
 
 

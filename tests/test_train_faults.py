@@ -43,7 +43,7 @@ default:
 """
 
 
-def _wait_for(condition, what: str) -> None:
+def wait_for(condition, what: str) -> None:
     """Poll ``condition`` until it holds; fail after :data:`PATIENCE`."""
     deadline = time.monotonic() + PATIENCE
     while not condition():
@@ -52,7 +52,7 @@ def _wait_for(condition, what: str) -> None:
         time.sleep(0.05)
 
 
-def _start_training(root: Path, timesteps: int) -> tuple[Path, subprocess.Popen]:
+def start_training(root: Path, timesteps: int) -> tuple[Path, subprocess.Popen]:
     """``marine train`` of :func:`tiny` settings into ``root/run``, in a process of its own."""
     (root / "tiny.yaml").write_text(tiny(timesteps))
     run = root / "run"
@@ -81,9 +81,9 @@ def run_cli(args: list[str], capsys) -> tuple[int, str, list[str]]:
 def live_run(tmp_path_factory):
     """A training process with a budget it never reaches, once it holds its folder's lock and
     handles signals (its config.json is written then)."""
-    run, process = _start_training(tmp_path_factory.mktemp("live"), 1_000_000)
+    run, process = start_training(tmp_path_factory.mktemp("live"), 1_000_000)
     try:
-        _wait_for(lambda: (run / "config.json").exists() or process.poll() is not None,
+        wait_for(lambda: (run / "config.json").exists() or process.poll() is not None,
                   "config.json")
         assert process.poll() is None, process.communicate()
         yield run, process
@@ -150,9 +150,9 @@ def test_a_folder_locked_in_this_process_is_refused_and_a_failed_start_leaves_no
 @pytest.fixture(scope="module")
 def killed(tmp_path_factory) -> Path:
     """The folder of a training killed (SIGKILL) once it had written a checkpoint."""
-    run, process = _start_training(tmp_path_factory.mktemp("killed"), 2000)
+    run, process = start_training(tmp_path_factory.mktemp("killed"), 2000)
     try:
-        _wait_for(lambda: sb3.checkpoints(run) or process.poll() is not None, "checkpoint")
+        wait_for(lambda: sb3.checkpoints(run) or process.poll() is not None, "checkpoint")
         process.kill()
         _, err = process.communicate(timeout=PATIENCE)
     finally:

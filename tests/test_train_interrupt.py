@@ -3,64 +3,25 @@
 from __future__ import annotations
 
 import json
-import os
 import re
 import signal
-import subprocess
-import sys
-import time
-from pathlib import Path
 
 import pytest
+from test_train_faults import PATIENCE, start_training, wait_for
 
 from agents.cli import main
 
-ROOT = Path(__file__).resolve().parents[1]
 #: A small PPO: a checkpoint within a few seconds of learning (2000 steps), five in the run.
-TINY = """\
-default:
-  ppo:
-    n_timesteps: 10000
-    n_envs: 2
-    policy: MlpPolicy
-    normalize: true
-    n_steps: 64
-    batch_size: 64
-    n_epochs: 1
-    learning_rate: lin_3e-4
-    policy_kwargs: {net_arch: [16]}
-"""
-
-
-#: How long to wait for an event of the training process (s): generous, for a loaded machine
-#: (a fixed 30 s failed twice at a load of 9-12); the test goes on as soon as the event happens.
-PATIENCE = 300.0
-
-
-def _wait_for(condition, timeout: float, what: str) -> None:
-    """Poll ``condition`` until it holds; fail after ``timeout`` seconds."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            pytest.fail(f"no {what} within {timeout} s")
-        time.sleep(0.05)
+TIMESTEPS = 10_000
 
 
 @pytest.fixture(scope="module")
 def interrupted(tmp_path_factory):
     """A ``marine train`` process stopped by SIGINT once it has written a checkpoint."""
-    root = tmp_path_factory.mktemp("interrupt")
-    (root / "tiny.yaml").write_text(TINY)
-    run = root / "run"
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get(
-        "PYTHONPATH", "")])}
-    process = subprocess.Popen(
-        [sys.executable, "-m", "agents.cli", "train", "marine_envs/USV-v0", "--out", str(run),
-         "--config", str(root / "tiny.yaml"), "--seed", "3", "--quiet"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    run, process = start_training(tmp_path_factory.mktemp("interrupt"), TIMESTEPS)
     try:
-        _wait_for(lambda: any((run / "checkpoints").glob("model_*_steps.zip"))
-                  or process.poll() is not None, PATIENCE, "checkpoint")
+        wait_for(lambda: any((run / "checkpoints").glob("model_*_steps.zip"))
+                 or process.poll() is not None, "checkpoint")
         process.send_signal(signal.SIGINT)
         out, err = process.communicate(timeout=PATIENCE)
     finally:
