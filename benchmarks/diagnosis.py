@@ -101,8 +101,8 @@ from estimators.diagnosis.cases import (  # noqa: E402
     term_factors,
 )
 from estimators.diagnosis.synthetic import synthesize, typical_effect  # noqa: E402
-from marine_envs.models import VehicleModel, get_model  # noqa: E402
 from marine_envs.files import write_json  # noqa: E402
+from marine_envs.models import VehicleModel, get_model  # noqa: E402
 from marine_envs.recording import Recording  # noqa: E402
 
 FloatArray = NDArray[np.float64]

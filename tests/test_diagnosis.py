@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from estimators.diagnosis import api, diagnose, read_params
+from estimators.diagnosis import diagnose, read_params, seaway
 from estimators.diagnosis.cases import PARTIAL, Case, build_effect, run_case
 from estimators.diagnosis.hypotheses import Family
 from estimators.diagnosis.report import markdown
@@ -158,7 +158,7 @@ def test_the_nominal_search_stands_when_the_one_on_resmoothed_states_is_not_conf
                 s.family, w=np.random.default_rng(0).permutation(s.family.w))
         return again
 
-    monkeypatch.setattr(api, "_resmoothed", unrepeatable)
+    monkeypatch.setattr(seaway, "_resmoothed", unrepeatable)
     effect = build_effect("usv", ("quadratic_damping", "r", {}), seed=0)
     diagnosis = diagnose(Case("usv", (effect,), 0.05, 0).recording(), "usv")
     assert [(f.effect, f.target) for f in diagnosis.findings] == [("quadratic_damping", "r")]
@@ -240,7 +240,7 @@ def test_damping_laws_one_record_cannot_tell_apart_are_named_with_the_test_that_
 
 
 def test_a_model_its_findings_cannot_mend_is_refused_naming_them(monkeypatch):
-    monkeypatch.setattr(api, "WORSE_THAN_HOLDING", 0.0)  # every model too poor to predict
+    monkeypatch.setattr(seaway, "WORSE_THAN_HOLDING", 0.0)  # every model too poor to predict
     effect = typical_effect("usv", "current", "r", strength=0.5, duration=120)
     diagnosis = diagnose(synthesize("usv", [effect], seed=1, noise=0.05, duration=120))
     assert diagnosis.mismatch is None
@@ -266,7 +266,7 @@ def test_wrong_parameters_are_flagged_or_calibrated():
 ])
 def test_bad_params_and_calibrate_are_refused_before_any_work(monkeypatch, params, calibrate,
                                                               message):
-    monkeypatch.setattr(api, "estimate", lambda *a, **k: pytest.fail("smoothing started"))
+    monkeypatch.setattr(seaway, "estimate", lambda *a, **k: pytest.fail("smoothing started"))
     recording = synthesize("usv", duration=100, noise=0.05)
     with pytest.raises(ValueError, match=message):
         diagnose(recording, params=params, calibrate=calibrate)

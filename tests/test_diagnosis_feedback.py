@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from estimators.diagnosis import Diagnosis, DiagnosisConfig, Finding, api, feedback
+from estimators.diagnosis import Diagnosis, DiagnosisConfig, Finding, feedback, seaway
 from estimators.diagnosis.residuals import Residuals, equation_error, rk4_step
 from estimators.diagnosis.synthetic import _gain
 from marine_envs.models import get_model
@@ -63,7 +63,7 @@ def test_the_confirmation_withdraws_it_and_says_why():
     res = closed_loop(1.0, seed=0)
     found = SimpleNamespace(effect=Effect("input_gain", "delta", {"k": 0.7}), held_out_p=1e-6,
                             alone=0.2)  # the search's and the held-out tests passed
-    why = api._unconfirmed_because(found, res, DiagnosisConfig())
+    why = seaway._unconfirmed_because(found, res, DiagnosisConfig())
     assert why.startswith("the input follows the controller")
     finding = Finding("input_gain", "delta", {"k": 0.7}, {}, 1.0, 0.2, "", withdrawn=why)
     diagnosis = Diagnosis("usv", False, unconfirmed=[finding])

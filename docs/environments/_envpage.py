@@ -78,11 +78,13 @@ def arguments(env_id: str, meanings: dict[str, str]) -> Markdown:
                      ).make_simulator
     parameters = {name: p.default for name, p in inspect.signature(simulator).parameters.items()
                   if p.kind is inspect.Parameter.KEYWORD_ONLY}
-    missing, extra = sorted(set(parameters) - set(meanings)), sorted(set(meanings) - set(parameters))
+    missing = sorted(set(parameters) - set(meanings))
+    extra = sorted(set(meanings) - set(parameters))
     if missing or extra:
         raise ValueError(f"{env_id}: arguments without a meaning on the page {missing}; "
                          f"meanings of arguments the environment does not have {extra}")
-    rows = [(f"`{name}`", _default(default), meanings[name]) for name, default in parameters.items()]
+    rows = [(f"`{name}`", _default(default), meanings[name])
+            for name, default in parameters.items()]
     return _table(("argument", "default", "meaning"), rows)
 
 

@@ -11,6 +11,7 @@ seaway, judged by the nominal filter's innovations:
 * :mod:`.selection` - cross-validated, significance-tested selection of the families;
 * :mod:`.rollout` - multi-step predictions with and without the findings;
 * :mod:`.feedback` - whether an input effect holds on the input the controller did not choose;
+* :mod:`.seaway` - the diagnosis of a record in a seaway: checks, smoothing, search, validation;
 
 model tests (decays, zigzags, lab runs, series of them), judged in free simulation:
 
@@ -30,7 +31,8 @@ and for both:
 * :mod:`.cases` - the seeded acceptance set and how a diagnosis is scored on it.
 """
 
-from .api import Diagnosis, Finding, check, diagnose, read_params
+from .api import check, diagnose, read_params
+from .result import Diagnosis, Finding
 from .selection import DiagnosisConfig
 from .synthetic import synthesize, typical_effect
 

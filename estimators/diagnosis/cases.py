@@ -22,7 +22,8 @@ from typing import Any
 from marine_envs.models.effects import KEY_PARAMETER, Effect
 from marine_envs.recording import Recording
 
-from .api import Diagnosis, Finding, diagnose
+from .api import diagnose
+from .result import Diagnosis, Finding
 from .synthetic import synthesize, typical_effect
 
 #: One catalogue entry on one vehicle: (effect, target, extra arguments of ``typical_effect``).

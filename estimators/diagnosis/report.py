@@ -31,9 +31,10 @@ from marine_envs.files import WriteError, write_text
 from marine_envs.models.effects import Effect, applied_inputs, state_term
 
 from . import model_test_figures, model_test_report
-from .api import Diagnosis, Finding, findings_model
 from .report_format import cell, change, num, parameters, pyplot, save, slug
 from .residuals import Residuals
+from .result import Diagnosis, Finding
+from .seaway import findings_model
 
 FloatArray = NDArray[np.float64]
 #: Length of the time windows shown for input effects and wave forcing, s.
