@@ -346,16 +346,30 @@ def _simulate(args: argparse.Namespace) -> int:
     options = {k: v for k, v in (("amplitude", args.amplitude), ("period", args.period),
                                  ("hold", args.hold)) if v is not None}
     disturbances = [n.strip() for n in args.disturbances.split(",") if n.strip()]
+    if args.actuator_noise is not None and args.actuator_sensors is None:
+        raise ValueError("--actuator-noise goes with --actuator-sensors")
+    actuators = _actuator_sensors(args.actuator_sensors)
     done = record(out, args.env, args.steps, seed=args.seed, policy=args.policy,
                   env_kwargs=env_kwargs, progress=not args.quiet, disturbances=disturbances,
+                  actuator_sensors=actuators, actuator_noise=args.actuator_noise or 0.0,
                   **options)
     kept = f": kept {done.steps} steps in {done.path}" if done.signal is not None else ""
     print(f"marine simulate: {done.stopped}{kept}", file=sys.stderr)
     print(f"wrote {done.steps} samples ({done.seconds:.1f} s) of model {done.model!r}: inputs "
           f"{', '.join(done.input_names)}; channels {', '.join(done.measured_names)}"
           + (f"; disturbances {', '.join(done.disturbance_names)}"
-             if done.disturbance_names else "") + f" -> {done.path}")
+             if done.disturbance_names else "")
+          + (f"; actuator positions {', '.join(n + '_applied' for n in done.actuator_names)}"
+             if done.actuator_names else "") + f" -> {done.path}")
     return 0 if done.signal is None else EXIT_SIGNAL + done.signal
+
+
+def _actuator_sensors(text: str | None) -> bool | list[str]:
+    """``--actuator-sensors``: absent, ``all`` (every input) or comma-separated inputs."""
+    if text is None:
+        return False
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    return True if names == ["all"] else names
 
 
 def _episode(args: argparse.Namespace) -> int:
@@ -713,8 +727,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim = commands.add_parser(
         "simulate", help="record an episode (CSV or Parquet) in the recording format",
         description="Run an environment under an excitation signal or LQR and record time, "
-                    "applied inputs and sensor outputs (SI units) with the model name and "
-                    "parameters as metadata. The format follows the file suffix: .csv (with a "
+                    "commanded inputs and sensor outputs (SI units) with the model name and "
+                    "parameters as metadata (an actuator effect of effects= acts after the "
+                    "command: --actuator-sensors records what the actuators applied too). The format follows the file suffix: .csv (with a "
                     ".csv.json sidecar) or .parquet (needs pyarrow).")
     sim.add_argument("--env", type=env_id, default="marine_envs/USV-v0",
                      help="environment id (marine_envs/USV-v0, or USV-v0)")
@@ -742,6 +757,15 @@ def build_parser() -> argparse.ArgumentParser:
                      help="comma-separated disturbance channels to record too (the model's "
                           "names, e.g. the ROV's morph command s_cmd or the hovercraft's "
                           "wind_north,wind_east): a diagnosis then takes them as known inputs")
+    sim.add_argument("--actuator-sensors", nargs="?", const="all", metavar="NAMES",
+                     help="record what the actuators applied too, as a position sensor on "
+                          "each (column <input>_applied, e.g. delta_applied): 'all' (the "
+                          "default when given alone) or comma-separated inputs; the input "
+                          "columns always hold the command")
+    sim.add_argument("--actuator-noise", type=_argument_type(
+        float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0"), metavar="STD",
+                     help="white noise of the actuator position sensors, standard deviation "
+                          "in the inputs' SI units (rad, N); default 0")
     sim.add_argument("--quiet", action="store_true", help="no progress bar")
     sim.set_defaults(run=_simulate)
 

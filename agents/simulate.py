@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 import marine_envs  # noqa: F401  (registers the environments)
-from marine_envs.recording import CHUNK_ROWS, Recording, stream_recording
+from marine_envs.recording import APPLIED, CHUNK_ROWS, Recording, stream_recording
 
 from .excitation import SIGNALS, Dithered, RandomSteps
 from .lqr import LQRPolicy
@@ -28,6 +28,11 @@ POLICIES = (*SIGNALS, "lqr")
 
 #: Hold time of the dither on ``lqr``, s: the random steps the diagnosis's own generator uses.
 DITHER_HOLD = 2.0
+#: Seeds the actuator position sensors' noise together with the run's seed: its own stream, so
+#: that recording an actuator changes nothing else in the run.
+ACTUATOR_NOISE_STREAM = 0x61637475
+#: Which inputs get an actuator position sensor: their names, or True for every input.
+ActuatorSensors = Sequence[str] | bool
 
 
 def make_policy(name: str, env: Any, seed: int | None, **options: float) -> Any:
@@ -73,6 +78,8 @@ class Recorded:
     input_names: tuple[str, ...]
     measured_names: tuple[str, ...]
     disturbance_names: tuple[str, ...]
+    #: The inputs recorded by an actuator position sensor too (columns ``<input>_applied``).
+    actuator_names: tuple[str, ...] = ()
 
 
 class _Run:
@@ -81,7 +88,8 @@ class _Run:
 
     def __init__(self, env_id: str, steps: int, seed: int | None, policy: str,
                  env_kwargs: Mapping[str, Any] | None, disturbances: Sequence[str],
-                 policy_options: Mapping[str, float]) -> None:
+                 policy_options: Mapping[str, float], actuator_sensors: ActuatorSensors = (),
+                 actuator_noise: float | Mapping[str, float] = 0.0) -> None:
         if steps < 2:
             raise ValueError(f"steps={steps!r} is invalid: a recording needs at least 2 steps")
         self.env = gym.make(env_id, max_episode_steps=steps, **dict(env_kwargs or {}))
@@ -91,21 +99,31 @@ class _Run:
         if unknown:
             raise ValueError(f"unknown disturbance(s) {unknown} of {env_id}: choose from "
                              f"{', '.join(names) or 'none'}")
+        inputs = sim.model.input_names
+        self.actuators = _actuators(actuator_sensors, inputs, env_id)
+        self._noise = _actuator_noise(actuator_noise, self.actuators)
+        self._applied = [inputs.index(name) for name in self.actuators]
+        self._rng = np.random.default_rng(None if seed is None else
+                                          [ACTUATOR_NOISE_STREAM, seed])
         self.policy = make_policy(policy, self.env, seed, **policy_options)
         self.steps, self.seed = steps, seed
         self._recorded = [names.index(name) for name in disturbances]
-        self.columns = ["time", *sim.model.input_names, *disturbances, *sim.sensors.channels]
+        self.columns = ["time", *inputs, *(name + APPLIED for name in self.actuators),
+                        *disturbances, *sim.sensors.channels]
         self.params = dataclasses.asdict(sim.model.params)
         self.meta = {"env": env_id, "seed": seed, "policy": policy,
                      "policy_options": dict(policy_options), "dt": sim.dt,
                      "env_kwargs": dict(env_kwargs or {}), "steps_requested": steps}
+        if self.actuators:
+            self.meta["actuator_noise"] = dict(zip(self.actuators, self._noise.tolist(),
+                                                   strict=True))
         self.terminated = False
         self.stopped = "not started"
 
     def rows(self, progress: bool = False) -> Iterator[np.ndarray]:
-        """Each step's row (time, applied inputs, recorded disturbances, sensor outputs: what
-        the policy saw before it acted), until the episode ends; :attr:`stopped` then says
-        why (a consumer that stops early says so itself)."""
+        """Each step's row (time, commanded inputs, actuator positions, recorded
+        disturbances, sensor outputs: what the policy saw before it acted), until the episode
+        ends; :attr:`stopped` then says why (a consumer that stops early says so itself)."""
         env = self.env
         obs, info = env.reset(seed=self.seed)
         with _bar(self.steps, progress) as bar:
@@ -117,7 +135,8 @@ class _Run:
                 obs, _, terminated, truncated, info = env.step(action)
                 if bar is not None:
                     bar.update()
-                yield np.concatenate(([time], info["action_applied"],
+                yield np.concatenate(([time], info["action_commanded"],
+                                      self._positions(info["action_applied"]),
                                       info["disturbance"][self._recorded], seen))
                 if terminated:
                     self.terminated = True
@@ -130,8 +149,46 @@ class _Run:
                     return
         self.stopped = f"the requested {self.steps} steps were reached"
 
+    def _positions(self, applied: np.ndarray) -> np.ndarray:
+        """What the actuator position sensors read of the ``applied`` inputs."""
+        if not self._applied:
+            return applied[:0]
+        return applied[self._applied] + self._noise * self._rng.standard_normal(
+            len(self._applied))
+
     def metadata(self) -> dict[str, Any]:
         return {**self.meta, "terminated": self.terminated, "stopped": self.stopped}
+
+
+def _actuators(chosen: ActuatorSensors, inputs: Sequence[str], env_id: str) -> tuple[str, ...]:
+    """The inputs ``chosen`` for an actuator position sensor, in model order.
+    :raises ValueError: a name that is not an input of the environment's model."""
+    if isinstance(chosen, bool):
+        return tuple(inputs) if chosen else ()
+    if isinstance(chosen, str):
+        chosen = [chosen]
+    unknown = sorted(set(chosen) - set(inputs))
+    if unknown:
+        raise ValueError(f"actuator sensor(s) {unknown} are not inputs of {env_id}: choose "
+                         f"from {', '.join(inputs)}")
+    return tuple(name for name in inputs if name in chosen)
+
+
+def _actuator_noise(noise: float | Mapping[str, float], actuators: Sequence[str]) -> np.ndarray:
+    """Per actuator position sensor, its white noise's standard deviation (input units).
+    :raises ValueError: a negative or non-finite value, or a name without a sensor."""
+    if isinstance(noise, Mapping):
+        unknown = sorted(set(noise) - set(actuators))
+        if unknown:
+            raise ValueError(f"actuator_noise names {unknown}, which have no actuator sensor "
+                             f"({', '.join(actuators) or 'none recorded'})")
+        values = np.array([float(noise.get(name, 0.0)) for name in actuators])
+    else:
+        values = np.full(len(actuators), float(noise))
+    if not np.all(np.isfinite(values) & (values >= 0)):
+        raise ValueError(f"actuator_noise={noise!r} is invalid: standard deviations >= 0 in "
+                         "the inputs' units")
+    return values
 
 
 def why_terminated(sim: Any) -> str:
@@ -164,17 +221,32 @@ def _bar(total: int, show: bool) -> Iterator[Any]:
 
 def simulate(env_id: str, steps: int, seed: int | None = None, policy: str = "prbs",
              env_kwargs: Mapping[str, Any] | None = None, progress: bool = False,
-             disturbances: Sequence[str] = (), **policy_options: float) -> Recording:
-    """Record ``steps`` steps of ``env_id`` under ``policy``: the applied inputs and the sensor
-    outputs, in SI units, with the model name, its parameters and the settings as metadata
-    (``stopped`` says why the run ended: the steps reached, or the episode terminated and
-    why). In memory: :func:`record` writes a long run to a file as it goes.
+             disturbances: Sequence[str] = (), actuator_sensors: ActuatorSensors = (),
+             actuator_noise: float | Mapping[str, float] = 0.0,
+             **policy_options: float) -> Recording:
+    """Record ``steps`` steps of ``env_id`` under ``policy``: the commanded inputs and the
+    sensor outputs, in SI units, with the model name, its parameters and the settings as
+    metadata (``stopped`` says why the run ended: the steps reached, or the episode terminated
+    and why). In memory: :func:`record` writes a long run to a file as it goes.
+
+    The input columns hold what the policy commanded (``info["action_commanded"]``: clipped
+    and scaled to the model's units), as a trial's log does; an actuator effect of
+    ``effects=`` in ``env_kwargs`` (a rate limit, saturation, delay, ...) acts after it, and
+    shows only in the motion, or in an actuator position sensor's column if one is asked for.
 
     :param disturbances: the model's disturbance channels to record too, exact (a logged
         command such as the ROV's morph ``s_cmd``, or an ideal wind or current sensor).
-    :raises ValueError: ``steps < 2`` or an unknown disturbance name, before any simulation.
+    :param actuator_sensors: inputs whose applied value (``info["action_applied"]``) is
+        recorded too by a position sensor on the actuator, as the column ``<input>_applied``
+        (``delta_applied``); True: every input. None by default: a log holds the command, and
+        only some vessels log an actuator's position as well.
+    :param actuator_noise: the white noise of those sensors, standard deviation in the input's
+        units (a number for all, or by input name); seeded by ``seed`` in a stream of its own.
+    :raises ValueError: ``steps < 2``, an unknown disturbance or input name, or a negative
+        noise, before any simulation.
     """
-    run = _Run(env_id, steps, seed, policy, env_kwargs, disturbances, policy_options)
+    run = _Run(env_id, steps, seed, policy, env_kwargs, disturbances, policy_options,
+               actuator_sensors, actuator_noise)
     rows = np.array(list(run.rows(progress)))
     data = pd.DataFrame(rows, columns=run.columns)
     return Recording(data, run.sim.model.name, run.params, run.metadata())
@@ -183,6 +255,8 @@ def simulate(env_id: str, steps: int, seed: int | None = None, policy: str = "pr
 def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
            policy: str = "prbs", env_kwargs: Mapping[str, Any] | None = None,
            progress: bool = False, disturbances: Sequence[str] = (),
+           actuator_sensors: ActuatorSensors = (),
+           actuator_noise: float | Mapping[str, float] = 0.0,
            chunk_rows: int = CHUNK_ROWS, **policy_options: float) -> Recorded:
     """:func:`simulate` into the recording file ``path`` (.csv with its sidecar, or .parquet)
     as it runs, ``chunk_rows`` rows at a time, so that memory stays bounded however long the
@@ -195,7 +269,8 @@ def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
     :raises marine_envs.files.WriteError: the file cannot be written (names it); the earlier
         file, if any, is left as it was.
     """
-    run = _Run(env_id, steps, seed, policy, env_kwargs, disturbances, policy_options)
+    run = _Run(env_id, steps, seed, policy, env_kwargs, disturbances, policy_options,
+               actuator_sensors, actuator_noise)
     model = run.sim.model
     with _StopOnSignals() as stop, stream_recording(path, model.name, run.columns, run.params,
                                                    run.meta, chunk_rows) as out, \
@@ -213,7 +288,8 @@ def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
     return Recorded(Path(path), model.name, out.rows, steps, out.last_time, run.stopped,
                     stop.signal, tuple(model.input_names),
                     tuple(name for name in model.output_names if name in channels),
-                    tuple(name for name in model.disturbance_names if name in disturbances))
+                    tuple(name for name in model.disturbance_names if name in disturbances),
+                    run.actuators)
 
 
 class _StopOnSignals:

@@ -9,11 +9,20 @@ Columns
         relative 1e-3 of the median step) unless the reader is called with
         ``require_uniform=False``.
     one column per model input
-        Named as in the model's ``input_names`` (for ``usv``: ``delta``). All are required.
+        Named as in the model's ``input_names`` (for ``usv``: ``delta``). All are required. The
+        input *commanded* (by a controller, a pilot, an excitation signal), as a trial's log
+        holds it; what the actuator delivered may differ (a rate limit, a saturation, a delay):
+        that goes in an actuator position sensor's column.
     one column per measured channel
         Named as in the model's ``output_names`` (its states, plus derived outputs such as the DP
         vessel's measured position; for ``usv``: ``v, r, psi, p, phi``). Channels that
         were not measured are simply absent, but at least one must be present.
+    optional: actuator position sensors
+        Named after a model input plus ``_applied`` (for ``usv``: ``delta_applied``), in the
+        input's unit: what the actuator delivered, read by a sensor on it (a rudder angle
+        indicator), beside the command in the input's own column. Complete, like the inputs.
+        A diagnosis judges the map from command to position directly and takes the position
+        as the input to the hull (:mod:`estimators.diagnosis.actuators`).
     optional: measured disturbances
         Named as in the model's ``disturbance_names`` (the hovercraft's ``wind_north``, the
         ROV's ``current_n`` or morph command ``s_cmd``): a wind, current or command that was
@@ -94,6 +103,8 @@ METADATA_KEY = "marine_envs"
 #: Metadata keys with a meaning of their own; every other key goes to :attr:`Recording.meta`.
 RESERVED_KEYS = ("model", "params", "units")
 TIME = "time"
+#: An actuator position sensor's column: the input's name plus this (``delta_applied``).
+APPLIED = "_applied"
 #: A time step may differ from the median step by this fraction before it counts as non-uniform.
 UNIFORM_RTOL = 1e-3
 #: Non-SI units accepted in the metadata: unit -> (SI unit, factor to multiply by).
@@ -164,6 +175,7 @@ class Recording:
         meta: Mapping[str, Any] | None = None,
         *,
         disturbances: Mapping[str, ArrayLike] | None = None,
+        applied: Mapping[str, ArrayLike] | None = None,
         require_uniform: bool = True,
     ) -> Recording:
         """Build and validate a recording from arrays in SI units.
@@ -177,6 +189,8 @@ class Recording:
         :param meta: free-form extra metadata.
         :param disturbances: measured disturbances by the model's disturbance names, each
             shape ``(n,)``, SI units.
+        :param applied: actuator position sensors by input name (``inputs`` being the
+            commands), each shape ``(n,)``, SI units: the columns ``<input>_applied``.
         :param require_uniform: reject a non-uniform time step.
         """
         vehicle = _vehicle(model, params or {})
@@ -196,6 +210,12 @@ class Recording:
         if unknown:
             raise ValueError(f"unknown disturbance(s) {unknown} for model {model!r}; allowed: "
                              f"{', '.join(vehicle.disturbance_names)}")
+        unknown = [name for name in applied or {} if name not in vehicle.input_names]
+        if unknown:
+            raise ValueError(f"unknown actuator(s) {unknown} for model {model!r}; allowed: "
+                             f"{', '.join(vehicle.input_names)}")
+        columns.update({name + APPLIED: np.asarray(values)
+                        for name, values in (applied or {}).items()})
         for given in (disturbances or {}, measurements):
             columns.update({name: np.asarray(values) for name, values in given.items()})
         for name, values in columns.items():
@@ -231,6 +251,7 @@ class Recording:
         low, high = vehicle.u_bounds
         bounds = dict(zip(vehicle.input_names, np.maximum(np.abs(low), np.abs(high)).tolist(),
                           strict=True))
+        bounds.update({name + APPLIED: bound for name, bound in bounds.items()})
         lines = [plausibility.recorded_values(name, self.data[name].to_numpy(), unit,
                                               declared.get(name), bounds.get(name))
                  for name, unit in self.units.items() if name != TIME]
@@ -321,6 +342,17 @@ class Recording:
         return get_model(self.model).input_names
 
     @property
+    def actuator_names(self) -> tuple[str, ...]:
+        """The inputs with an actuator position sensor's column (``<input>_applied``), in
+        model order."""
+        return tuple(n for n in get_model(self.model).input_names
+                     if n + APPLIED in self.data.columns)
+
+    def applied(self, name: str) -> np.ndarray:
+        """Input ``name``'s actuator position sensor, SI units, shape ``(n,)``."""
+        return self.data[name + APPLIED].to_numpy(dtype=float)
+
+    @property
     def disturbance_names(self) -> tuple[str, ...]:
         """Measured disturbance columns present in the recording, in model order."""
         return tuple(n for n in get_model(self.model).disturbance_names if n in self.data.columns)
@@ -348,8 +380,8 @@ class Recording:
 
     @property
     def units(self) -> dict[str, str]:
-        """SI unit of every column, in column order (time, inputs, measured disturbances,
-        measured channels)."""
+        """SI unit of every column, in column order (time, inputs, actuator position
+        sensors, measured disturbances, measured channels)."""
         vehicle = get_model(self.model)
         si = _si_units(vehicle)
         return {name: si[name] for name in _canonical(self.data, vehicle)}
@@ -740,7 +772,8 @@ def _check_meta(meta: Any) -> None:
 
 def _check_columns(data: pd.DataFrame, vehicle: VehicleModel) -> None:
     columns = list(data.columns)
-    allowed = (TIME, *vehicle.input_names, *vehicle.output_names, *vehicle.disturbance_names)
+    allowed = (TIME, *vehicle.input_names, *_applied_names(vehicle), *vehicle.output_names,
+               *vehicle.disturbance_names)
     duplicated = sorted({str(c) for c in data.columns[data.columns.duplicated()]})
     if duplicated:
         raise ValueError(f"duplicate column(s) {duplicated}")
@@ -760,12 +793,18 @@ def _check_columns(data: pd.DataFrame, vehicle: VehicleModel) -> None:
 
 
 def _canonical(data: pd.DataFrame, vehicle: VehicleModel) -> list[str]:
-    """Column order of the format: time, inputs, measured disturbances and measured channels
-    in model order."""
+    """Column order of the format: time, inputs, actuator position sensors, measured
+    disturbances and measured channels in model order."""
     present = set(data.columns)
+    applied = [name for name in _applied_names(vehicle) if name in present]
     disturbances = [name for name in vehicle.disturbance_names if name in present]
     measured = [name for name in vehicle.output_names if name in present]
-    return [TIME, *vehicle.input_names, *disturbances, *measured]
+    return [TIME, *vehicle.input_names, *applied, *disturbances, *measured]
+
+
+def _applied_names(vehicle: VehicleModel) -> list[str]:
+    """The columns of actuator position sensors the model allows: ``<input>_applied``."""
+    return [name + APPLIED for name in vehicle.input_names]
 
 
 def _is_numeric(column: pd.Series) -> bool:
@@ -821,9 +860,10 @@ def _check_time(time: np.ndarray, require_uniform: bool) -> None:
 def _si_units(vehicle: VehicleModel) -> dict[str, str]:
     """SI unit of every column the model allows."""
     return {TIME: "s", **dict(zip(vehicle.input_names, vehicle.input_units, strict=True)),
+            **dict(zip(_applied_names(vehicle), vehicle.input_units, strict=True)),
             **dict(zip(vehicle.disturbance_names, vehicle.disturbance_units, strict=True)),
             **dict(zip(vehicle.output_names, vehicle.output_units, strict=True))}
 
 
-__all__ = ["METADATA_KEY", "UNIT_CONVERSIONS", "Recording", "RecordingStream", "read_recording",
+__all__ = ["APPLIED", "METADATA_KEY", "UNIT_CONVERSIONS", "Recording", "RecordingStream", "read_recording",
            "stream_recording", "write_recording"]

@@ -4,7 +4,8 @@ Checks the input first: parameter overrides and the names to calibrate (a ``Valu
 the entry, before any work), the recordings' model and disturbance columns. Then chooses the way
 the record is judged: model tests (a series, a free decay) go to :mod:`.model_test`, judged in
 free simulation; a record in a seaway to :mod:`.seaway`, judged by the nominal filter's
-innovations. A recording the tool cannot judge gets ``mismatch=None`` and the reason, never a
+innovations; either way, a record with actuator position sensors gets the actuators' effects
+read off them (:mod:`.actuators`) and its hull judged on the positions. A recording the tool cannot judge gets ``mismatch=None`` and the reason, never a
 confident wrong answer.
 """
 
@@ -20,6 +21,7 @@ import numpy as np
 from marine_envs.models import MeasuredDisturbances, VehicleModel, get_model
 from marine_envs.recording import Recording, read_recording
 
+from . import actuators
 from .model_test import diagnose_series
 from .result import Diagnosis
 from .seaway import SEAWAY_STAGES, Stage, check, diagnose_seaway, other_model
@@ -133,7 +135,9 @@ def _diagnose(recordings: list[Recording], vehicle: VehicleModel | None,
         diagnosis = diagnose_seaway(recordings, vehicle, calibrate, config, log, stage)
     if isinstance(vehicle, MeasuredDisturbances):
         diagnosis.measured_disturbances = vehicle.measured_disturbances
-    return diagnosis
+    # an actuator position sensor shows its actuator's effects directly (the hull is judged
+    # on the position: residuals.model_inputs)
+    return actuators.merged(diagnosis, actuators.judge(recordings, vehicle, config))
 
 
 def _named(recording: Recording, path: str | Path) -> Recording:

@@ -133,13 +133,20 @@ def equation_error(model: VehicleModel, x: FloatArray, u: FloatArray, dt: float,
 
 
 def model_inputs(recording: Recording, model: VehicleModel) -> FloatArray:
-    """The record's inputs to ``model`` ``(T, n_u)``: the actuators as recorded, and any
-    measured disturbance (:class:`~marine_envs.models.MeasuredDisturbances`) cleared of its
-    sensor's white noise, which the model would otherwise take for a real wind or current
-    (:func:`denoised`)."""
+    """The record's inputs to ``model`` ``(T, n_u)``: each actuator's position where a sensor
+    on it was recorded (``<input>_applied``: what reached the hull, after any actuator effect,
+    which :mod:`.actuators` judges from command and position), else its command; and any
+    measured disturbance (:class:`~marine_envs.models.MeasuredDisturbances`). Both kinds of
+    sensor are cleared of their white noise, which the model would otherwise take for a
+    real input, wind or current (:func:`denoised`)."""
     u = recording.inputs_for(model).copy()
     actuators = len(model.actuator_names)  # the measured disturbances follow them
-    u[:, actuators:] = denoised(u[:, actuators:])
+    sensed = [j for j, name in enumerate(model.input_names[:actuators])
+              if name in recording.actuator_names]
+    for j in sensed:
+        u[:, j] = recording.applied(model.input_names[j])
+    sensed += list(range(actuators, u.shape[1]))
+    u[:, sensed] = denoised(u[:, sensed])
     return u
 
 

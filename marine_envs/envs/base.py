@@ -3,8 +3,10 @@
 :class:`MarineEnv` is a single environment (a batch of one); :class:`MarineVectorEnv` is its native
 vector twin (a batch of N, no Python loop over boats while stepping), made for each vehicle by
 :func:`vector_env`. Both follow docs/architecture.md contract 2: observations are sensor outputs,
-``info["state"]`` is the true state, ``info["action_applied"]`` the physical input, and the reward
-is minus the task's quadratic cost.
+``info["state"]`` is the true state, ``info["action_applied"]`` the physical input the actuators
+applied, ``info["action_commanded"]`` the one the action commanded (clipped and scaled to the model's
+input units, before any actuator effect of ``effects=``: a rate limit, saturation, dead zone, delay
+or gain; the same values when there is none), and the reward is minus the task's quadratic cost.
 """
 
 from __future__ import annotations
@@ -78,7 +80,9 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     A vehicle's environment sets :attr:`make_simulator` (its keyword arguments are the
     environment's) and, optionally, :attr:`renderer`; :func:`vector_env` makes its vector twin.
     Actions are normalised to [-1, 1] per input and mapped linearly to the physical limits;
-    larger actions are clipped (``info["action_clipped"]``), NaN or inf raises ``ValueError``.
+    larger actions are clipped (``info["action_clipped"]``), NaN or inf raises ``ValueError``;
+    ``info["action_commanded"]`` is the physical input commanded, ``info["action_applied"]``
+    the one the actuators applied (they differ only under actuator effects).
     ``effects=`` (every environment) adds physics the nominal model leaves out: catalogue
     effects, their dicts or a diagnosis JSON's path, e.g. ``gym.make(ENV_ID,
     effects="diagnosis.json")`` to train on the vessel as recorded.
@@ -126,6 +130,7 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
         # views, not copies: the simulator replaces these arrays every step, never writes them
         sim = self.sim
         return {"state": sim.x[0], "action_applied": sim.u[0],
+                "action_commanded": sim.u_commanded[0],
                 "action_clipped": bool(sim.clipped[0]),
                 # without a sea the simulator never replaces d: a copy, not a shared view
                 "disturbance": sim.d[0] if sim.disturbances is not None else sim.d[0].copy(),
@@ -223,6 +228,7 @@ class MarineVectorEnv(VectorEnv):
     def _info(self) -> dict[str, Any]:
         sim, m = self.sim, self._mask
         return {"state": sim.x, "_state": m, "action_applied": sim.u, "_action_applied": m,
+                "action_commanded": sim.u_commanded, "_action_commanded": m,
                 "action_clipped": sim.clipped, "_action_clipped": m,
                 "disturbance": sim.d if sim.disturbances is not None else sim.d.copy(),
                 "_disturbance": m, "measurement_mask": sim.valid,

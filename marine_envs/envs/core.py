@@ -270,7 +270,7 @@ class Simulator:
         """Allocate state for ``batch_size`` boats."""
         self.batch_size = batch_size
         self.x = np.tile(self.model.x0, (batch_size, 1))
-        self.u = np.tile(self.model.u0, (batch_size, 1))
+        self.u = self._commanded = np.tile(self.model.u0, (batch_size, 1))
         self.d = np.zeros((batch_size, len(self.model.disturbance_names)))
         self.clipped = self._never_clipped = np.zeros(batch_size, dtype=bool)
         self._never_clipped.flags.writeable = False
@@ -282,6 +282,13 @@ class Simulator:
         if self.actuators is not None:
             self.actuators.bind(batch_size)
         self._compiled = CompiledStep.of(self)
+
+    @property
+    def u_commanded(self) -> FloatArray:
+        """The physical inputs the actions commanded (batch x inputs): clipped and scaled to
+        the model's input units, before any actuator effect; :attr:`u` is what the actuators
+        applied (the same array when there are none)."""
+        return self.u if self.actuators is None else self._commanded
 
     @property
     def compiled(self) -> bool:
@@ -358,6 +365,9 @@ class Simulator:
         for i, rng in zip(idx, rngs, strict=True):
             self.x[i] = self.initial_state(rng) if x0 is None else x0
         self.u[idx], self.d[idx], self.steps[idx] = self.model.u0, 0, 0
+        if self.actuators is not None:
+            self._commanded = self._commanded.copy()
+            self._commanded[idx] = self.model.u0
         if self.clipped[idx].any():
             self.clipped = self.clipped.copy()
             self.clipped[idx] = False
@@ -370,7 +380,9 @@ class Simulator:
             self.actuators.reset(idx)
 
     def apply(self, action: ArrayLike) -> None:
-        """Map normalised actions (batch x actuators) in [-1, 1] to physical inputs.
+        """Map normalised actions (batch x actuators) in [-1, 1] to physical inputs: the
+        commanded ones (:attr:`u_commanded`), then through the input effects, if any, the
+        applied ones (:attr:`u`).
 
         Larger actions are clipped and noted in :attr:`clipped`.
         :raises ValueError: NaN or inf in the action, or a wrong shape.
@@ -394,6 +406,7 @@ class Simulator:
         f = self.u_mid + self.u_scale * a
         self.u = f if self._allocation is None else f @ self._allocation
         if self.actuators is not None:
+            self._commanded = self.u
             self.u = self.actuators.step(self.u)
 
     def _actions(self, action: ArrayLike) -> FloatArray:
