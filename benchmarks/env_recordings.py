@@ -17,10 +17,14 @@ its key parameter within 30 %, and no confident finding on an effect-free record
 the diagnosis was tuned on these cases; seeds 0 and 1 were looked at while it was built
 (issue 22), so seeds 2 and 3 are the held-out ones to quote.
 
-Only state effects and sensor biases: the environment records the inputs its actuators applied,
-so an actuator effect is inside the recorded input and no diagnosis could see it.
+Actuator effects too (:data:`ACTUATORS`: a rudder's rate limit and saturation, a gain or dead
+zone, a flap's delay): the record holds the command, as a trial's log does, and the effect acts
+between it and the hull; ``--actuator-sensors`` records the actuator's position as well (the
+column ``<input>_applied``, with a position sensor's noise, :data:`ACTUATOR_NOISE`), which the
+diagnosis reads the effect off directly. ``--kinds state`` or ``actuator`` runs one kind only.
 
     python benchmarks/env_recordings.py [--vehicles usv,rov] [--seeds 0,1] [--dither 0]
+                                        [--kinds state,actuator] [--actuator-sensors]
                                         [--instrumented [--ideal]] [--json out.json]
                                         [--docs [PAGE]]
 """
@@ -57,9 +61,9 @@ random-step dither on every input) with the environment's own sea, sensors and a
 diagnoses the record against the nominal model with the default settings. Each case is scored
 as the acceptance set is: the effect and target ranked first, its key parameter within 30 %,
 and no confident finding on an effect-free record. Nothing in the diagnosis was tuned on these
-cases; seeds 0 and 1 were looked at while it was built, seeds 2 and 3 are held out. Only state
-effects and sensor biases: an actuator effect is inside the recorded applied input, where no
-diagnosis could see it."""
+cases; seeds 0 and 1 were looked at while it was built, seeds 2 and 3 are held out. Actuator
+effects (a rate limit, saturation, gain, dead zone, delay) act between the recorded command and
+the hull; with an actuator position sensor recorded as well, the diagnosis reads them off it."""
 
 #: Vehicle -> environment id and the effects hidden in it (effect, target, extra parameters).
 #: Not the DP vessel: its LQR needs the low-frequency position, which its sensors do not give
@@ -78,6 +82,18 @@ VEHICLES: dict[str, tuple[str, list[tuple[str, str, dict[str, str]]]]] = {
                                                  ("linear_damping", "v", {}),
                                                  ("sensor_bias", "psi", {})]),
 }
+#: Vehicle -> the actuator effects hidden in it (effect, target, extra parameters): where the
+#: acceptance set puts them (the hydrofoil's on its rear flap).
+ACTUATORS: dict[str, list[tuple[str, str, dict[str, str]]]] = {
+    "usv": [("input_rate_limit", "delta", {}), ("input_saturation", "delta", {})],
+    "hydrofoil": [("input_delay", "alpha_s2", {})],
+    "rov": [("input_gain", "X", {})],
+    "hovercraft": [("input_gain", "delta", {}), ("input_deadzone", "delta", {})],
+}
+KINDS = ("state", "actuator")
+#: With ``--actuator-sensors``: the white noise of an actuator position sensor, a share of its
+#: input's largest magnitude (0.5 %: 0.17 deg on a 35-deg rudder).
+ACTUATOR_NOISE = 0.005
 #: Disturbance channels every record carries: commands, known to whoever ran the trial (without
 #: the ROV's morph command no model follows its record: "the model does not describe this
 #: recording" on all four effect records of seed 0).
@@ -90,11 +106,15 @@ INSTRUMENTS: dict[str, dict[str, float]] = {
 DURATION = 300.0
 
 
-def cases(vehicles: Sequence[str], seeds: Sequence[int]) -> list[tuple[str, Case]]:
-    """``(env_id, case)`` for every hidden effect and seed, plus one effect-free case per seed."""
+def cases(vehicles: Sequence[str], seeds: Sequence[int],
+          kinds: Sequence[str] = KINDS) -> list[tuple[str, Case]]:
+    """``(env_id, case)`` for every hidden effect of ``kinds`` and seed, plus one effect-free
+    case per seed."""
     out = []
     for vehicle in vehicles:
-        env_id, entries = VEHICLES[vehicle]
+        env_id, state = VEHICLES[vehicle]
+        entries = (state if "state" in kinds else []) + \
+            (ACTUATORS.get(vehicle, []) if "actuator" in kinds else [])
         for seed in seeds:
             for effect, target, extra in entries:
                 hidden = build_effect(vehicle, (effect, target, extra), seed=seed)
@@ -104,10 +124,11 @@ def cases(vehicles: Sequence[str], seeds: Sequence[int]) -> list[tuple[str, Case
 
 
 def run(env_id: str, case: Case, dither: float | None = None, instrumented: bool = False,
-        ideal: bool = False):
+        ideal: bool = False, actuator_sensors: bool = False):
     """Record the case in its environment (``dither``: share of each input's half range, None
     for the generator's; ``instrumented``: with its wind or current, measured with the
-    instruments' noise unless ``ideal``) and diagnose it."""
+    instruments' noise unless ``ideal``; ``actuator_sensors``: with every actuator's position,
+    :data:`ACTUATOR_NOISE`) and diagnose it."""
     probe = simulate(env_id, 2, seed=case.seed, policy="lqr")
     steps = int(DURATION / float(probe.meta["dt"]))
     effects: list[Effect] = list(case.effects)
@@ -116,11 +137,24 @@ def run(env_id: str, case: Case, dither: float | None = None, instrumented: bool
     recording = simulate(env_id, steps, seed=case.seed, policy="lqr",
                          env_kwargs={"effects": effects} if effects else {},
                          disturbances=COMMANDS.get(case.model, ()) + tuple(noise),
+                         actuator_sensors=actuator_sensors,
+                         actuator_noise=_actuator_noise(case.model) if actuator_sensors else 0.0,
                          **({"amplitude": share} if share > 0 else {}))
     rng = np.random.default_rng(case.seed)
     for name, std in noise.items():
         recording.data[name] += 0.0 if ideal else std * rng.standard_normal(len(recording.data))
     return run_case(case, recording)
+
+
+def _actuator_noise(model: str) -> dict[str, float]:
+    """:data:`ACTUATOR_NOISE` of each input's largest magnitude, by input name."""
+    from marine_envs.models import get_model
+
+    vehicle = get_model(model)
+    low, high = vehicle.u_bounds
+    largest = np.maximum(np.abs(low), np.abs(high))
+    return {n: ACTUATOR_NOISE * float(b) for n, b in zip(vehicle.input_names, largest,
+                                                         strict=True)}
 
 
 def format_outcomes(outcomes: Sequence) -> str:
@@ -151,6 +185,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                              "an anemometer's or a current profiler's noise")
     parser.add_argument("--ideal", action="store_true",
                         help="with --instrumented: record them exactly")
+    parser.add_argument("--kinds", default=",".join(KINDS),
+                        help="comma-separated kinds of hidden effect: state (with sensor "
+                             "biases), actuator (default: both)")
+    parser.add_argument("--actuator-sensors", action="store_true",
+                        help="record every actuator's position too (a position sensor with "
+                             f"{ACTUATOR_NOISE:.1%} of its range as noise)")
     parser.add_argument("--json", metavar="OUT", help="write every outcome as JSON")
     add_docs_option(parser, "env_recordings")
     args = parser.parse_args(argv)
@@ -160,11 +200,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(f"unknown vehicle(s) {unknown}; choose from {', '.join(VEHICLES)}")
     if args.ideal and not args.instrumented:
         parser.error("--ideal goes with --instrumented")
+    kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
+    if not kinds or set(kinds) - set(KINDS):
+        parser.error(f"--kinds {args.kinds!r}: comma-separated, of {', '.join(KINDS)}")
     check_page_path(parser, args.docs)
     seeds = [int(s) for s in args.seeds.split(",")]
     with benchmark_run("env_recordings", argv) as bench:
-        outcomes = [run(env_id, case, args.dither, args.instrumented, args.ideal)
-                    for env_id, case in tqdm(cases(vehicles, seeds), desc="diagnosing",
+        outcomes = [run(env_id, case, args.dither, args.instrumented, args.ideal,
+                        args.actuator_sensors)
+                    for env_id, case in tqdm(cases(vehicles, seeds, kinds), desc="diagnosing",
                                              unit="case")]
         bench.show(format_outcomes(outcomes), f"Seeds {', '.join(map(str, seeds))}")
         rates = summarize(outcomes)

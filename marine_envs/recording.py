@@ -772,8 +772,8 @@ def _check_meta(meta: Any) -> None:
 
 def _check_columns(data: pd.DataFrame, vehicle: VehicleModel) -> None:
     columns = list(data.columns)
-    allowed = (TIME, *vehicle.input_names, *_applied_names(vehicle), *vehicle.output_names,
-               *vehicle.disturbance_names)
+    allowed = (TIME, *vehicle.input_names, *vehicle.output_names, *vehicle.disturbance_names,
+               *_applied_names(vehicle))
     duplicated = sorted({str(c) for c in data.columns[data.columns.duplicated()]})
     if duplicated:
         raise ValueError(f"duplicate column(s) {duplicated}")
