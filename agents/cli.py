@@ -729,8 +729,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run an environment under an excitation signal or LQR and record time, "
                     "commanded inputs and sensor outputs (SI units) with the model name and "
                     "parameters as metadata (an actuator effect of effects= acts after the "
-                    "command: --actuator-sensors records what the actuators applied too). The format follows the file suffix: .csv (with a "
-                    ".csv.json sidecar) or .parquet (needs pyarrow).")
+                    "command: --actuator-sensors records what the actuators applied too). The "
+                    "format follows the file suffix: .csv (with a .csv.json sidecar) or "
+                    ".parquet (needs pyarrow).")
     sim.add_argument("--env", type=env_id, default="marine_envs/USV-v0",
                      help="environment id (marine_envs/USV-v0, or USV-v0)")
     sim.add_argument("--steps", type=_argument_type(int, lambda v: v >= 2, "an integer >= 2"),

@@ -865,5 +865,5 @@ def _si_units(vehicle: VehicleModel) -> dict[str, str]:
             **dict(zip(vehicle.output_names, vehicle.output_units, strict=True))}
 
 
-__all__ = ["APPLIED", "METADATA_KEY", "UNIT_CONVERSIONS", "Recording", "RecordingStream", "read_recording",
-           "stream_recording", "write_recording"]
+__all__ = ["APPLIED", "METADATA_KEY", "UNIT_CONVERSIONS", "Recording", "RecordingStream",
+           "read_recording", "stream_recording", "write_recording"]

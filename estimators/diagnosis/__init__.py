@@ -11,6 +11,7 @@ seaway, judged by the nominal filter's innovations:
 * :mod:`.selection` - cross-validated, significance-tested selection of the families;
 * :mod:`.rollout` - multi-step predictions with and without the findings;
 * :mod:`.feedback` - whether an input effect holds on the input the controller did not choose;
+* :mod:`.actuators` - input effects read off an actuator position sensor, command against position;
 * :mod:`.seaway` - the diagnosis of a record in a seaway: checks, smoothing, search, validation;
 
 model tests (decays, zigzags, lab runs, series of them), judged in free simulation:

@@ -5,8 +5,8 @@ the entry, before any work), the recordings' model and disturbance columns. Then
 the record is judged: model tests (a series, a free decay) go to :mod:`.model_test`, judged in
 free simulation; a record in a seaway to :mod:`.seaway`, judged by the nominal filter's
 innovations; either way, a record with actuator position sensors gets the actuators' effects
-read off them (:mod:`.actuators`) and its hull judged on the positions. A recording the tool cannot judge gets ``mismatch=None`` and the reason, never a
-confident wrong answer.
+read off them (:mod:`.actuators`) and its hull judged on the positions. A recording the tool
+cannot judge gets ``mismatch=None`` and the reason, never a confident wrong answer.
 """
 
 from __future__ import annotations

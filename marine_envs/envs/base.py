@@ -4,9 +4,10 @@
 vector twin (a batch of N, no Python loop over boats while stepping), made for each vehicle by
 :func:`vector_env`. Both follow docs/architecture.md contract 2: observations are sensor outputs,
 ``info["state"]`` is the true state, ``info["action_applied"]`` the physical input the actuators
-applied, ``info["action_commanded"]`` the one the action commanded (clipped and scaled to the model's
-input units, before any actuator effect of ``effects=``: a rate limit, saturation, dead zone, delay
-or gain; the same values when there is none), and the reward is minus the task's quadratic cost.
+applied, ``info["action_commanded"]`` the one the action commanded (clipped and scaled to the
+model's input units, before any actuator effect of ``effects=``: a rate limit, saturation, dead
+zone, delay or gain; the same values when there is none), and the reward is minus the task's
+quadratic cost.
 """
 
 from __future__ import annotations
