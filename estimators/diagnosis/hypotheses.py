@@ -217,6 +217,8 @@ def input_families(res: Residuals) -> Iterator[Family]:
         c = u[:, j] - model.u0[j]
         if np.std(c) <= 0 or name not in model.actuator_names:  # not a measured wind
             continue
+        if name in res.sensed:  # its position was recorded: judged there (.actuators)
+            continue
         yield Family("input_gain", name, [{}], terms([Effect("input_gain", name, {"k": 2.0})]),
                      coefficient="k", offset=1.0)
         magnitude = np.abs(c)

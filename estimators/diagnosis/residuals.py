@@ -88,6 +88,8 @@ class Residuals:
     :param observable: per state, whether the measured channels see it.
     :param innovations: the last pass's filter innovations and their sensitivities.
     :param forcing: the last pass's coloured forcing of the force equations (noise model).
+    :param sensed: the inputs whose actuator position was recorded (``u`` holds the position;
+        their input effects are judged on that sensor, :mod:`.actuators`, not searched here).
     """
 
     model: VehicleModel
@@ -104,6 +106,7 @@ class Residuals:
     substeps: int = 1
     innovations: Innovations | None = None
     forcing: tuple[Forcing, ...] = ()
+    sensed: tuple[str, ...] = ()
 
     @property
     def midpoint(self) -> FloatArray:
@@ -263,7 +266,8 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
                      error, noise, observable_states(model, channels), substeps,
                      Innovations.from_filter(ekf, smoothed.filtered, u, n),
-                     _with_levels(forcing, smoothed.x[:, 0, n + len(forcing):]))
+                     _with_levels(forcing, smoothed.x[:, 0, n + len(forcing):]),
+                     recording.actuator_names)
 
 
 def _statistics(forcing: Sequence[Forcing]) -> FloatArray:
