@@ -15,7 +15,7 @@ from estimators.diagnosis import actuators, diagnose
 from estimators.diagnosis.residuals import model_inputs
 from estimators.diagnosis.selection import DiagnosisConfig
 from marine_envs.models import get_model
-from marine_envs.models.effects import rate_limited
+from marine_envs.models.effects import INPUT_EFFECTS, rate_limited
 from marine_envs.recording import Recording, read_recording, write_recording
 
 USV = "marine_envs/USV-v0"
@@ -62,6 +62,9 @@ def test_the_diagnosis_names_the_rate_limit_from_command_and_position(rate_limit
     assert first.confidence >= 0.99 and first.improvement > 0.9
     assert diagnosis.mismatch is True
     assert "delta_applied" in first.explanation
+    # the rudder's position was recorded: no input effect of it is searched through the hull
+    hull = diagnosis.findings[1:] + diagnosis.unconfirmed
+    assert not [f for f in hull if f.effect in INPUT_EFFECTS and f.target == "delta"]
 
 
 def test_no_actuator_effect_where_the_position_follows_the_command():
