@@ -226,7 +226,8 @@ class Recording:
     def _plausibility(self, declared: Mapping[str, str]) -> list[str]:
         """One line per column whose values look like a unit mistake
         (:mod:`marine_envs.plausibility`): inputs beyond twice the model's bounds, angles
-        beyond 2 pi, a heading that turns faster than its rate says."""
+        beyond 2 pi, rates beyond half a turn a second, an angle that turns faster or slower
+        than its rate says."""
         vehicle = _vehicle(self.model, self.params)
         low, high = vehicle.u_bounds
         bounds = dict(zip(vehicle.input_names, np.maximum(np.abs(low), np.abs(high)).tolist(),
@@ -234,10 +235,10 @@ class Recording:
         lines = [plausibility.recorded_values(name, self.data[name].to_numpy(), unit,
                                               declared.get(name), bounds.get(name))
                  for name, unit in self.units.items() if name != TIME]
-        lines += [plausibility.heading_rate(psi, self.data[psi].to_numpy(), r,
-                                            self.data[r].to_numpy(), self.time)
-                  for psi, r in plausibility.HEADING_RATES.items()
-                  if psi in self.data.columns and r in self.data.columns]
+        lines += [plausibility.angle_rate(angle, self.data[angle].to_numpy(), rate,
+                                          self.data[rate].to_numpy(), self.time)
+                  for angle, rate in plausibility.rate_pairs(vehicle)
+                  if angle in self.data.columns and rate in self.data.columns]
         return [line for line in lines if line]
 
     # -- missing samples and cuts ----------------------------------------------------------------

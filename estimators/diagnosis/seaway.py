@@ -280,7 +280,7 @@ def _band(res: Residuals, channel: str | None) -> dict[str, float] | None:
     if channel is None or channel not in res.model.state_names:
         return None
     e = res.error[:, res.model.state_names.index(channel)]
-    f, psd = signal.welch(e, fs=1 / res.dt, nperseg=min(len(e), int(60 / res.dt)))
+    f, psd = signal.welch(e, fs=1 / res.dt, nperseg=min(len(e), max(8, int(60 / res.dt))))
     cumulative = np.cumsum(psd) / max(psd.sum(), 1e-300)
     omega = 2 * np.pi * f
     low = omega[np.searchsorted(cumulative, 0.1)]
