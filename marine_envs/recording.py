@@ -629,7 +629,8 @@ def _read_parquet(path: Path) -> tuple[pd.DataFrame, dict[str, Any] | None, str]
     raw = (table.schema.metadata or {}).get(METADATA_KEY.encode())
     where = f"Parquet schema metadata key {METADATA_KEY!r}"
     metadata = None if raw is None else _parse_metadata(raw.decode("utf-8"), where)
-    return table.to_pandas(), metadata, where
+    # the table's columns are freed as they are converted: one copy of a long record at a time
+    return table.to_pandas(self_destruct=True, split_blocks=True), metadata, where
 
 
 def _sidecars(path: Path) -> tuple[Path, Path]:
@@ -656,13 +657,13 @@ def _to_si(data: pd.DataFrame, units: Any, vehicle: VehicleModel) -> pd.DataFram
     if unknown:
         raise ValueError(f"units given for unknown column(s) {unknown} of model "
                          f"{vehicle.name!r}; allowed: {', '.join(si)}")
-    data = data.copy()
+    converted = {}
     for name, unit in units.items():
         factor = _si_factor(name, unit, si[name])
         # A non-numeric column is left for validate() to report with its row.
         if factor != 1.0 and name in data.columns and _is_numeric(data[name]):
-            data[name] = data[name].astype(float) * factor
-    return data
+            converted[name] = data[name].astype(float) * factor
+    return data.assign(**converted) if converted else data  # a copy only if converted
 
 
 def _si_factor(column: str, unit: Any, expected: str) -> float:

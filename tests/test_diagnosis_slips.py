@@ -127,6 +127,7 @@ def test_a_fast_record_is_decimated_anti_aliased_and_said(usv):
 def test_a_record_beyond_the_budget_is_cut_to_its_most_excited_part(usv, monkeypatch):
     vehicle = get_model("usv")
     monkeypatch.setitem(sizing.SEAWAY_BYTES_PER_SAMPLE, "usv", sizing.MEMORY_BUDGET / 200)
+    monkeypatch.setattr(sizing, "ORDINARY_SECONDS", 10.0)
     # the rudder moves only from 30 to 45 s
     moving = (usv.time >= 30) & (usv.time < 45)
     rec = _with(usv, delta=np.where(moving, usv.data["delta"], 0.0))
@@ -139,6 +140,7 @@ def test_a_record_beyond_the_budget_is_cut_to_its_most_excited_part(usv, monkeyp
 
 def test_a_cut_record_says_so_in_the_diagnosis(usv, monkeypatch):
     monkeypatch.setitem(sizing.SEAWAY_BYTES_PER_SAMPLE, "usv", sizing.MEMORY_BUDGET / 700)
+    monkeypatch.setattr(sizing, "ORDINARY_SECONDS", 10.0)
     lines = []
     diagnosis = diagnose(usv, log=lines.append)
     assert diagnosis.mismatch is not None

@@ -106,9 +106,9 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
 def expected_seconds(recordings: Sequence[Recording], method: str = "auto",
                      calibrate: bool = False) -> float | None:
     """A rough run time of :func:`diagnose`, s, from the records' length (as
-    :func:`.sizing.plan` sizes them) and the model's measured rate (:data:`SEAWAY_SECONDS`; a calibration smooths twice more); None for free
-    simulation (model tests), which resamples to the model's bandwidth: seconds for a linear
-    model, minutes for a nonlinear one."""
+    :func:`.sizing.plan` sizes them) and the model's measured rate (:data:`SEAWAY_SECONDS`; a
+    calibration smooths twice more); None for free simulation (model tests), which resamples
+    to the model's bandwidth: seconds for a linear model, minutes for a nonlinear one."""
     if method == "free" or (method == "auto" and _model_test(recordings)):
         return None
     fixed, per_sample = SEAWAY_SECONDS.get(recordings[0].model, DEFAULT_SECONDS)

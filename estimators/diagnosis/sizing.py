@@ -42,6 +42,9 @@ DEFAULT_BYTES_PER_SAMPLE = 2.0e5
 #: Memory the seaway method may take, bytes: with the interpreter and its libraries (0.25 GB)
 #: and a 2M-row record's own storage, a diagnosis stays within 2 GB.
 MEMORY_BUDGET = 1.0e9
+#: An ordinary record (300 s at the method's step, the acceptance set's) is never cut, whatever
+#: the budget says (the ROV's 3001 samples take 4.2 GB: bounded, not within the budget).
+ORDINARY_SECONDS = 300.0
 #: The prediction horizon (s, :class:`.selection.DiagnosisConfig`) must span this many steps.
 STEPS_PER_HORIZON = 2
 
@@ -94,7 +97,7 @@ def step_problem(recording: Recording, vehicle: VehicleModel, horizon: float) ->
                f"{max(1, int(coarsest / (step / decimate)))} at most (a long record is sized "
                "by the diagnosis itself)")
     elif step / 1000 <= coarsest:
-        why = f"is the time in milliseconds? (declare \"units\": {{\"time\": \"ms\"}})"
+        why = "is the time in milliseconds? (declare \"units\": {\"time\": \"ms\"})"
     else:
         why = "record the vehicle faster"
     return (f"{name}: sample step {step:.3g} s ({1 / step:.3g} Hz) is too coarse for the "
@@ -109,7 +112,8 @@ def plan(recording: Recording, vehicle: VehicleModel) -> Plan:
     factor = max(1, int(target / step * (1 + 1e-6)))
     samples = len(recording.data) // factor
     per_sample = SEAWAY_BYTES_PER_SAMPLE.get(vehicle.name, DEFAULT_BYTES_PER_SAMPLE)
-    return Plan(factor, step * factor, samples, int(MEMORY_BUDGET / per_sample))
+    ordinary = int(round(ORDINARY_SECONDS / (step * factor))) + 1
+    return Plan(factor, step * factor, samples, max(int(MEMORY_BUDGET / per_sample), ordinary))
 
 
 def sized(recording: Recording, vehicle: VehicleModel,
@@ -125,7 +129,7 @@ def sized(recording: Recording, vehicle: VehicleModel,
                                        f"{vehicle.name} model (anti-aliased)"}
     if how.cut:
         recording, (start, stop) = most_excited(recording, how.budget)
-        done["cut"] = {"start": start, "stop": stop, "samples": how.budget,
+        done["cut"] = {"start": round(start, 6), "stop": round(stop, 6), "samples": how.budget,
                        "reason": f"{how.samples} samples are more than the seaway method's "
                                  f"budget of {how.budget} (its memory grows with the record): "
                                  "judged on the most excited part"}
