@@ -35,9 +35,13 @@ from marine_envs.recording import TIME, Recording
 #: own (``env.unwrapped.sim.dt``); a record sampled faster is decimated to it.
 SEAWAY_STEP = {"usv": 0.1, "rov": 0.1, "dp_vessel": 0.5, "hovercraft": 0.1, "hydrofoil": 0.05}
 DEFAULT_STEP = 0.1
-#: Peak memory of the seaway method per sample, bytes, measured (peak RSS of ``marine
-#: diagnose`` on LQR records of 3000 and 6000 samples made by ``marine simulate``, seed 2).
-SEAWAY_BYTES_PER_SAMPLE = {"usv": 9.0e4}
+#: Peak memory of the seaway method per sample, bytes: the slope of the peak RSS of ``marine
+#: diagnose`` between records of 3000 and 6000 samples (1500 and 3000 for the ROV; made by
+#: ``marine simulate`` under LQR, seed 2; the DP vessel and hydrofoil by ``synthesize``). What
+#: grows: the candidate terms' regressors, ``(T, n, k)`` each (``hypotheses._in_equation``,
+#: 69 MB of the USV's 3000 samples), and the filter's matrices, ``(T, n, n)`` each.
+SEAWAY_BYTES_PER_SAMPLE = {"usv": 9.0e4, "rov": 1.31e6, "dp_vessel": 1.7e5, "hovercraft": 3.4e4,
+                           "hydrofoil": 4.8e4}
 DEFAULT_BYTES_PER_SAMPLE = 2.0e5
 #: Memory the seaway method may take, bytes: with the interpreter and its libraries (0.25 GB)
 #: and a 2M-row record's own storage, a diagnosis stays within 2 GB.
