@@ -516,11 +516,15 @@ def _diagnose_log(show: bool) -> Callable[[str], None]:
 
 
 def _print_diagnosis(diagnosis: Any) -> None:
+    from estimators.diagnosis.sizing import described
+
     for line in diagnosis.warnings:
         print(f"  warning: {line}")
     if diagnosis.missing_samples:
         print("  missing samples (taken as dropped measurements): " + ", ".join(
             f"{c} {n}" for c, n in diagnosis.missing_samples.items()))
+    for line in described(diagnosis.record):
+        print(f"  {line}")
     print(diagnosis.summary())
     if diagnosis.mismatch is False and diagnosis.reason:
         print(f"  reason: {diagnosis.reason}")

@@ -12,9 +12,12 @@ import inspect
 import math
 import warnings
 from collections.abc import Callable, Iterable, Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .models import VehicleModel
 
 TWO_PI = 2 * math.pi
 #: An environment argument more than this many times its default is far outside the range the
@@ -30,11 +33,23 @@ REFERENCE_ARGUMENTS = ("setpoint", "reference")
 BEYOND_BOUND = 2.0
 #: Channels that are headings: unwrapped over many turns they may exceed 2 pi.
 HEADINGS = ("psi",)
-#: Heading -> its rate channel, compared by :func:`heading_rate`.
-HEADING_RATES = {"psi": "r"}
+#: A rotation rate beyond this, rad/s (half a turn a second), is beyond every vehicle of the
+#: catalogue: the simulated records' largest is 0.11 rad/s (a USV's roll rate), so a rate
+#: recorded in deg/s and declared rad/s shows here from 3.1 deg/s on.
+MAX_RATE = math.pi
+#: A ratio between an angle's change and its rate's integral within this factor of 180 / pi is
+#: a degree slip beyond doubt (the simulated records' ratios are 1.00 +- 0.05).
+DEGREE_SLIP = 1.25
 #: Units of the scale arguments, for the messages.
 _UNITS = {"dt": "s", "hs": "m", "wind_speed": "m/s", "wind_gust": "m/s", "current_std": "m/s"}
 DEGREE = math.pi / 180
+#: An angle's change is compared with its rate's integral over spans of these many seconds
+#: (the best correlated): a USV's roll correlates best over 1 s (0.99), a hovercraft's slow
+#: turns over 10 s (0.94; 0.49 over 1 s).
+RATIO_WINDOWS = (1.0, 3.0, 10.0)
+#: Below this correlation between an angle's change and its rate's integral the two say
+#: nothing about each other's unit.
+MIN_CORRELATION = 0.5
 
 
 class PlausibilityWarning(UserWarning):
@@ -105,34 +120,81 @@ def recorded_values(name: str, values: np.ndarray, si_unit: str, declared: str |
         # the numbers as written already fit the bound in radians
         return (f"{name}: {peak:.3g} rad is {peak / bound:.1%} of the model's bound "
                 f"{bound:.3g} rad: radians declared as deg?")
-    # a heading may be unwrapped over many turns (a hovercraft spinning): see heading_rate
+    # a heading may be unwrapped over many turns (a hovercraft spinning): see angle_rate
     if si_unit == "rad" and peak > TWO_PI and not name.startswith(HEADINGS):
         return (f"{name}: {peak:.3g} rad exceeds 2 pi: "
                 f"{'degrees declared as rad' if declared == 'rad' else 'a unit mistake'}?")
+    if si_unit == "rad/s" and peak > MAX_RATE:
+        return (f"{name}: {peak:.3g} rad/s exceeds {MAX_RATE:.3g} rad/s (half a turn a second), "
+                f"beyond what a vessel turns at: "
+                f"{'deg/s declared as rad/s' if declared == 'rad/s' else 'a unit mistake'}?")
     return ""
 
 
-def heading_rate(heading: str, psi: np.ndarray, rate: str, r: np.ndarray, time: np.ndarray
-                 ) -> str:
-    """Why a recorded heading ``psi`` (rad) and its rate ``r`` (rad/s) disagree on the unit,
-    or ``""``: the (unwrapped) heading regressed on the integral of the rate, where both are
-    known, more than :data:`BEYOND_BOUND` times it (degrees declared as rad?). Integrating
-    averages the sensors' noise out; a heading the rate does not explain says nothing."""
-    keep = np.isfinite(psi) & np.isfinite(r)
+def rate_pairs(vehicle: VehicleModel) -> list[tuple[str, str]]:
+    """The (angle, rate) pairs of ``vehicle``'s states: an angle (rad) whose linearised
+    equation is its rate (rad/s) alone, e.g. the USV's (psi, r) and (phi, p)."""
+    A, B, E = vehicle.linearize()
+    names, units = vehicle.state_names, vehicle.state_units
+    pairs = []
+    for i, angle in enumerate(names):
+        terms = np.flatnonzero(A[i])
+        if len(terms) == 1 and A[i, terms[0]] == 1 and not B[i].any() and not E[i].any() \
+                and units[i] == "rad" and units[terms[0]] == "rad/s":
+            pairs.append((angle, names[terms[0]]))
+    return pairs
+
+
+def angle_rate_ratio(angle: np.ndarray, rate: np.ndarray, time: np.ndarray) -> float | None:
+    """How many times a recorded ``angle``'s change (rad, unwrapped) exceeds the integral of its
+    ``rate`` (rad/s) over the same spans (least squares over every span of the length of
+    :data:`RATIO_WINDOWS` where the two correlate best), or None where they do not correlate
+    (too little motion over the sensors' noise to tell). Integrating over a span averages the
+    rate's noise out; a short span keeps an oscillation (a roll) whole, a long one sees a slow
+    turn over the heading's noise."""
+    keep = np.isfinite(angle) & np.isfinite(rate)
     if keep.sum() < 10:
-        return ""
-    t, turn = time[keep], r[keep]
+        return None
+    t, turn = time[keep], rate[keep]
     turned = np.concatenate([[0.0], np.cumsum(0.5 * (turn[1:] + turn[:-1]) * np.diff(t))])
-    course = np.unwrap(psi[keep])
-    turned, course = turned - turned.mean(), course - course.mean()
-    if not np.std(turned) > 0 or not np.std(course) > 0 \
-            or np.corrcoef(course, turned)[0, 1] < 0.5:
+    course = np.unwrap(angle[keep])
+    best, ratio = MIN_CORRELATION, None
+    for window in RATIO_WINDOWS:
+        span = int(np.clip(np.searchsorted(t, t[0] + window), 1, len(t) // 2))
+        changed, integral = course[span:] - course[:-span], turned[span:] - turned[:-span]
+        if np.std(changed) > 0 and np.std(integral) > 0:
+            correlation = float(np.corrcoef(changed, integral)[0, 1])
+            if correlation >= best:
+                best, ratio = correlation, float(changed @ integral / (integral @ integral))
+    return ratio
+
+
+def angle_rate(angle: str, values: np.ndarray, rate: str, rates: np.ndarray, time: np.ndarray
+               ) -> str:
+    """Why a recorded ``angle`` (rad) and its ``rate`` (rad/s) disagree on the unit, or ``""``:
+    the angle changes more than :data:`BEYOND_BOUND` times what the rate's integral says
+    (degrees declared as rad?), or less than a :data:`BEYOND_BOUND`-th of it (deg/s declared as
+    rad/s?) (:func:`angle_rate_ratio`)."""
+    ratio = angle_rate_ratio(values, rates, time)
+    if ratio is None or 1 / BEYOND_BOUND <= ratio <= BEYOND_BOUND:
         return ""
-    gain = float(course @ turned / (turned @ turned))
-    if gain <= BEYOND_BOUND:
-        return ""
-    return (f"{heading}: turns {gain:.0f}x more than the rate {rate} says: degrees declared "
-            f"as rad (or {rate} in the wrong unit)?")
+    if 1 / DEGREE_SLIP <= max(ratio, 1 / ratio) / 1000 <= DEGREE_SLIP:
+        return (f"{angle} and its rate {rate} disagree by {max(ratio, 1 / ratio):.0f}x: the "
+                "time in milliseconds (or seconds) declared as the other?")
+    if ratio > BEYOND_BOUND:
+        return (f"{angle}: turns {ratio:.0f}x more than the rate {rate} says: degrees declared "
+                f"as rad (or {rate} in the wrong unit)?")
+    return (f"{rate}: says {angle} turns {1 / ratio:.0f}x more than it does: deg/s declared as "
+            f"rad/s (or {angle} in the wrong unit)?")
+
+
+def degree_slip(ratio: float | None) -> bool:
+    """Whether an :func:`angle_rate_ratio` is 180 / pi or its inverse (within
+    :data:`DEGREE_SLIP`): one of the two is in degrees, beyond doubt."""
+    if ratio is None or ratio <= 0:
+        return False
+    factor = max(ratio, 1 / ratio) * DEGREE
+    return 1 / DEGREE_SLIP <= factor <= DEGREE_SLIP
 
 
 def _unit_hint(si_unit: str, declared: str, peak: float, bound: float) -> str:
@@ -150,5 +212,5 @@ def _unit_hint(si_unit: str, declared: str, peak: float, bound: float) -> str:
     return "a unit mistake, or not the model's input?"
 
 
-__all__ = ["PlausibilityWarning", "environment_arguments", "heading_rate", "recorded_values",
-           "warn"]
+__all__ = ["PlausibilityWarning", "angle_rate", "angle_rate_ratio", "degree_slip",
+           "environment_arguments", "rate_pairs", "recorded_values", "warn"]

@@ -246,7 +246,8 @@ class Recording:
     def _plausibility(self, declared: Mapping[str, str]) -> list[str]:
         """One line per column whose values look like a unit mistake
         (:mod:`marine_envs.plausibility`): inputs beyond twice the model's bounds, angles
-        beyond 2 pi, a heading that turns faster than its rate says."""
+        beyond 2 pi, rates beyond half a turn a second, an angle that turns faster or slower
+        than its rate says."""
         vehicle = _vehicle(self.model, self.params)
         low, high = vehicle.u_bounds
         bounds = dict(zip(vehicle.input_names, np.maximum(np.abs(low), np.abs(high)).tolist(),
@@ -255,10 +256,10 @@ class Recording:
         lines = [plausibility.recorded_values(name, self.data[name].to_numpy(), unit,
                                               declared.get(name), bounds.get(name))
                  for name, unit in self.units.items() if name != TIME]
-        lines += [plausibility.heading_rate(psi, self.data[psi].to_numpy(), r,
-                                            self.data[r].to_numpy(), self.time)
-                  for psi, r in plausibility.HEADING_RATES.items()
-                  if psi in self.data.columns and r in self.data.columns]
+        lines += [plausibility.angle_rate(angle, self.data[angle].to_numpy(), rate,
+                                          self.data[rate].to_numpy(), self.time)
+                  for angle, rate in plausibility.rate_pairs(vehicle)
+                  if angle in self.data.columns and rate in self.data.columns]
         return [line for line in lines if line]
 
     # -- missing samples and cuts ----------------------------------------------------------------
@@ -660,7 +661,8 @@ def _read_parquet(path: Path) -> tuple[pd.DataFrame, dict[str, Any] | None, str]
     raw = (table.schema.metadata or {}).get(METADATA_KEY.encode())
     where = f"Parquet schema metadata key {METADATA_KEY!r}"
     metadata = None if raw is None else _parse_metadata(raw.decode("utf-8"), where)
-    return table.to_pandas(), metadata, where
+    # the table's columns are freed as they are converted: one copy of a long record at a time
+    return table.to_pandas(self_destruct=True, split_blocks=True), metadata, where
 
 
 def _sidecars(path: Path) -> tuple[Path, Path]:
@@ -687,13 +689,13 @@ def _to_si(data: pd.DataFrame, units: Any, vehicle: VehicleModel) -> pd.DataFram
     if unknown:
         raise ValueError(f"units given for unknown column(s) {unknown} of model "
                          f"{vehicle.name!r}; allowed: {', '.join(si)}")
-    data = data.copy()
+    converted = {}
     for name, unit in units.items():
         factor = _si_factor(name, unit, si[name])
         # A non-numeric column is left for validate() to report with its row.
         if factor != 1.0 and name in data.columns and _is_numeric(data[name]):
-            data[name] = data[name].astype(float) * factor
-    return data
+            converted[name] = data[name].astype(float) * factor
+    return data.assign(**converted) if converted else data  # a copy only if converted
 
 
 def _si_factor(column: str, unit: Any, expected: str) -> float:

@@ -1,7 +1,10 @@
 """``diagnose(recording, model) -> Diagnosis``: locate, name, model and validate a mismatch.
 
-Checks the input first: parameter overrides and the names to calibrate (a ``ValueError`` naming
-the entry, before any work), the recordings' model and disturbance columns. Then chooses the way
+Checks the input first, a ``ValueError`` naming the problem before any work: parameter overrides
+and the names to calibrate, the same recording given twice, the recordings' model, disturbance
+columns and sample step (:func:`.sizing.step_problem`: time in milliseconds, a decimation too
+large), and an angle and its rate a degree factor apart (:func:`_degree_slips`). A record in a
+seaway is then sized to the method's step and sample budget (:mod:`.sizing`). Then chooses the way
 the record is judged: model tests (a series, a free decay) go to :mod:`.model_test`, judged in
 free simulation; a record in a seaway to :mod:`.seaway`, judged by the nominal filter's
 innovations; either way, a record with actuator position sensors gets the actuators' effects
@@ -18,10 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from marine_envs import plausibility
 from marine_envs.models import MeasuredDisturbances, VehicleModel, get_model
 from marine_envs.recording import Recording, read_recording
 
-from . import actuators
+from . import actuators, sizing
 from .model_test import diagnose_series
 from .result import Diagnosis
 from .seaway import SEAWAY_STAGES, Stage, check, diagnose_seaway, other_model
@@ -68,8 +72,14 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
     that look like unit mistakes (:attr:`~marine_envs.recording.Recording.warnings`) are
     listed in ``warnings``.
 
-    :raises ValueError: invalid ``params``, ``calibrate`` or ``method`` (naming the entry), or a
-        recording that is not valid for the model (naming the column); all before any work.
+    A record in a seaway sampled faster than the method's step, or longer than its sample
+    budget, is decimated (anti-aliased) and cut to its most excited part (:mod:`.sizing`),
+    said on ``log`` and in the Diagnosis' ``record``: memory does not grow with the record.
+
+    :raises ValueError: invalid ``params``, ``calibrate`` or ``method`` (naming the entry), a
+        recording given twice (naming both), a recording that is not valid for the model
+        (naming the column), a sample step too coarse for the model, or an angle and its rate
+        a degree factor apart (naming them); all before any work.
     """
     if method not in METHODS:
         raise ValueError(f"method={method!r}: must be one of {', '.join(METHODS)}")
@@ -82,6 +92,7 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
         raise ValueError("no recording given")
     recordings = [r if isinstance(r, Recording) else _named(read_recording(
         r, model=None if vehicle is None else vehicle.name), r) for r in sources]
+    _refuse_duplicates(recordings)
     notes = {"warnings": [w for rec in recordings for w in rec.warnings],
              "missing_samples": _missing(recordings)}
     if notes["missing_samples"] and log is not None:
@@ -95,14 +106,14 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
 
 def expected_seconds(recordings: Sequence[Recording], method: str = "auto",
                      calibrate: bool = False) -> float | None:
-    """A rough run time of :func:`diagnose`, s, from the records' length and the model's
-    measured rate (:data:`SEAWAY_SECONDS`; a calibration smooths twice more); None for free
-    simulation (model tests), which resamples to the model's bandwidth: seconds for a linear
-    model, minutes for a nonlinear one."""
+    """A rough run time of :func:`diagnose`, s, from the records' length (as
+    :func:`.sizing.plan` sizes them) and the model's measured rate (:data:`SEAWAY_SECONDS`; a
+    calibration smooths twice more); None for free simulation (model tests), which resamples
+    to the model's bandwidth: seconds for a linear model, minutes for a nonlinear one."""
     if method == "free" or (method == "auto" and _model_test(recordings)):
         return None
     fixed, per_sample = SEAWAY_SECONDS.get(recordings[0].model, DEFAULT_SECONDS)
-    samples = sum(len(rec.time) for rec in recordings)
+    samples = sum(sizing.plan(rec, get_model(rec.model)).judged for rec in recordings)
     return (fixed + per_sample * samples) * (2.0 if calibrate else 1.0)
 
 
@@ -128,16 +139,69 @@ def _diagnose(recordings: list[Recording], vehicle: VehicleModel | None,
     for rec in recordings:
         if rec.model != vehicle.name:
             return Diagnosis(vehicle.name, None, other_model(rec, vehicle))
+    for problem in (sizing.step_problem(rec, vehicle, config.horizon) for rec in recordings):
+        if problem:
+            raise ValueError(problem)
+    slips = [line for rec in recordings for line in _degree_slips(rec, vehicle)]
+    if slips:
+        raise ValueError("; ".join(slips))
     vehicle = _with_measured_disturbances(vehicle, recordings)
     if method == "free" or (method == "auto" and _model_test(recordings)):
         diagnosis = diagnose_series(recordings, vehicle, calibrate, log=log, stage=stage)
-    else:
+    elif len(recordings) > 1:
         diagnosis = diagnose_seaway(recordings, vehicle, calibrate, config, log, stage)
+    else:
+        record, resized = sizing.sized(recordings[0], vehicle, log)
+        diagnosis = diagnose_seaway([record], vehicle, calibrate, config, log, stage)
+        diagnosis.record = resized
     if isinstance(vehicle, MeasuredDisturbances):
         diagnosis.measured_disturbances = vehicle.measured_disturbances
     # an actuator position sensor shows its actuator's effects directly (the hull is judged
     # on the position: residuals.model_inputs)
     return actuators.merged(diagnosis, actuators.judge(recordings, vehicle, config))
+
+
+def _refuse_duplicates(recordings: Sequence[Recording]) -> None:
+    """:raises ValueError: two of ``recordings`` hold the same data (one file given twice, or
+    a copy of it), naming them: one test twice is not a series of two (judged as one, it
+    reports a false input delay)."""
+    for k, rec in enumerate(recordings):
+        for first in range(k):
+            other = recordings[first]
+            if other.model == rec.model and other.data.shape == rec.data.shape \
+                    and other.data.equals(rec.data):
+                raise ValueError(f"the same recording is given twice: "
+                                 f"{_label(recordings, first)} and {_label(recordings, k)} "
+                                 "hold identical data; give each test once")
+
+
+def _label(recordings: Sequence[Recording], k: int) -> str:
+    return f"recording {k + 1} ({recordings[k].meta.get('name', 'unnamed')})"
+
+
+def _degree_slips(recording: Recording, vehicle: VehicleModel) -> list[str]:
+    """An angle and its rate 180 / pi apart (:func:`~marine_envs.plausibility.degree_slip`):
+    one of them is in degrees, declared in radians. Judged, the record would give a confident
+    wrong answer (a yaw rate in deg/s: "no mismatch"), so it is refused, naming the fix."""
+    out = []
+    name = recording.meta.get("name", "the recording")
+    for angle, rate in plausibility.rate_pairs(vehicle):
+        if angle not in recording.data.columns or rate not in recording.data.columns:
+            continue
+        ratio = plausibility.angle_rate_ratio(recording.data[angle].to_numpy(),
+                                              recording.data[rate].to_numpy(), recording.time)
+        if not plausibility.degree_slip(ratio):
+            continue
+        assert ratio is not None
+        if ratio < 1:
+            column, unit = rate, "deg/s"
+            told = f"{rate} is {1 / ratio:.1f}x the rate at which {angle} changes"
+        else:
+            column, unit = angle, "deg"
+            told = f"{angle} changes {ratio:.1f}x more than its rate {rate} says"
+        out.append(f"{name}: {told}: {column} is in {unit}, not in SI units; declare it "
+                   f"(\"units\": {{\"{column}\": \"{unit}\"}} in the metadata) or convert it")
+    return out
 
 
 def _named(recording: Recording, path: str | Path) -> Recording:

@@ -358,7 +358,7 @@ def total_contribution(diagnosis: Diagnosis, skip: int | None = None) -> FloatAr
 def welch(x: FloatArray, dt: float, segment: float = 60.0) -> tuple[FloatArray, FloatArray]:
     """Welch spectrum: angular frequencies (rad/s) and one-sided density per rad/s of ``x``
     sampled every ``dt`` s, ``segment`` s per segment (as the band's)."""
-    f, psd = signal.welch(x, fs=1 / dt, nperseg=min(len(x), int(segment / dt)))
+    f, psd = signal.welch(x, fs=1 / dt, nperseg=min(len(x), max(8, int(segment / dt))))
     return 2 * np.pi * f, psd / (2 * np.pi)
 
 

@@ -75,6 +75,9 @@ class Diagnosis:
     warnings: list[str] = field(default_factory=list)
     #: samples a logger dropped per channel (NaN in the record), taken as missing measurements
     missing_samples: dict[str, int] = field(default_factory=dict)
+    #: how a record in a seaway was sized before the work (:mod:`.sizing`): ``decimated``
+    #: (factor, step) and ``cut`` (start, stop, samples), each with its reason; empty: whole
+    record: dict[str, Any] = field(default_factory=dict)
     residuals: Residuals | None = field(default=None, repr=False)
     rollouts: Rollouts | None = field(default=None, repr=False)
     selection: Selection | None = field(default=None, repr=False)
@@ -101,7 +104,7 @@ class Diagnosis:
                 out[key] = getattr(self, key)
         if self.measured_disturbances:
             out["measured_disturbances"] = list(self.measured_disturbances)
-        for key in ("warnings", "missing_samples"):
+        for key in ("warnings", "missing_samples", "record"):
             if getattr(self, key):
                 out[key] = getattr(self, key)
         if self.residuals is not None and self.residuals.forcing:

@@ -32,7 +32,13 @@ from marine_envs.recording import Recording
 from . import feedback
 from .explain import explain, separating_test
 from .output_error import Coordinates, parameter_bounds, term_label
-from .residuals import Residuals, equation_error, estimate, white_noise_std
+from .residuals import (
+    Residuals,
+    equation_error,
+    estimate,
+    observable_states,
+    white_noise_std,
+)
 from .result import Diagnosis, Finding
 from .rollout import Rollouts
 from .selection import (
@@ -93,8 +99,6 @@ def diagnose_seaway(recordings: Sequence[Recording], vehicle: VehicleModel,
         vehicle, calibration, quality = _calibrate(recording, vehicle, calibrate)
     begin("smoothing")
     residuals = estimate(recording, vehicle)
-    if not residuals.observable.any():
-        return Diagnosis(vehicle.name, None, "the measured channels observe no state")
     rollouts = Rollouts(residuals, config.fit_fraction, config.horizon, config.stride)
     # a missing actuator effect can make the nominal predict worse than holding (a flap's
     # delay or dead zone), so a model is called wrong only if its findings cannot mend it
@@ -159,6 +163,8 @@ def check(recording: Recording, vehicle: VehicleModel) -> str:
                 f"{MIN_SAMPLES} samples and {MIN_DURATION:.0f} s (30 % of it is held out) to "
                 "judge a record in a seaway; a model test (decay, zigzag, lab run) is judged "
                 "in free simulation: --method free, or several recordings as one series")
+    if not observable_states(vehicle, recording.measured_names).any():
+        return "the measured channels observe no state"
     y = recording.measurements
     noise = white_noise_std(y)
     moving = np.std(y, axis=0) > MIN_SIGNAL_TO_NOISE * noise
@@ -280,7 +286,7 @@ def _band(res: Residuals, channel: str | None) -> dict[str, float] | None:
     if channel is None or channel not in res.model.state_names:
         return None
     e = res.error[:, res.model.state_names.index(channel)]
-    f, psd = signal.welch(e, fs=1 / res.dt, nperseg=min(len(e), int(60 / res.dt)))
+    f, psd = signal.welch(e, fs=1 / res.dt, nperseg=min(len(e), max(8, int(60 / res.dt))))
     cumulative = np.cumsum(psd) / max(psd.sum(), 1e-300)
     omega = 2 * np.pi * f
     low = omega[np.searchsorted(cumulative, 0.1)]
