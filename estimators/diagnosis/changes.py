@@ -86,12 +86,6 @@ class ChangePoint:
     z: float
     p_value: float
 
-    @property
-    def relative(self) -> float:
-        """The change as a share of what it changes (``after / before - 1``), NaN when the
-        before value is zero."""
-        return self.after / self.before - 1 if self.before else math.nan
-
 
 @dataclass
 class _Profile:
