@@ -66,6 +66,8 @@ def separating_test(a: Effect, b: Effect) -> str:
 
 def describe(effect: Effect) -> str:
     """What the effect means for the vehicle, with its numbers."""
+    if effect.effect == "parameter_change":
+        return describe_change(effect, {}, {})
     p, t = effect.parameters, effect.target
     return {
         "current": f"a steady force or current the model lacks: {t}'s equation needs a constant "
@@ -87,7 +89,6 @@ def describe(effect: Effect) -> str:
         "nonlinear_restoring": f"the restoring force on {t} is not linear in "
                                f"{p.get('source')}: {p.get('c', 0):+.3g}*{p.get('source')}^3 "
                                f"({'stiffening' if p.get('c', 0) < 0 else 'softening'})",
-        "parameter_change": describe_change(effect, {}, {}),
         "wave_frequency": f"an oscillation the model does not have drives {t}: narrow-band at "
                           f"{p.get('omega', 0):.3g} rad/s (period "
                           f"{6.283 / max(p.get('omega', 1e-9), 1e-9):.3g} s), damping ratio "
