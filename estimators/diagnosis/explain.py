@@ -36,8 +36,8 @@ def describe_change(effect: Effect, std: Mapping[str, float], details: Mapping[s
                     f"{change.before + c:+.3g})"
                     if change is not None else ""))
     text = (f"the damping of {t} changes at {when}: from then on {t}'s equation needs "
-            f"{size}*{t} ({'more' if c < 0 else 'less'} damping, or a heavier/lighter "
-            "vehicle: a mass, drag or added-mass change)")
+            f"{size}*{t} ({'more' if c < 0 else 'less'} damping than before: a drag, mass or "
+            "added-mass change)")
     if change is not None and change.before:
         text += (f"; its damping derivative d({t}')/d{t} goes from {change.before:+.3g} to "
                  f"{change.before + c:+.3g} 1/s ({c / change.before:+.0%})")
