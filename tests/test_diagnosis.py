@@ -8,11 +8,12 @@ import pytest
 
 from estimators.diagnosis import diagnose, read_params, seaway
 from estimators.diagnosis.cases import PARTIAL, Case, build_effect, run_case
+from estimators.diagnosis.changes import time_posterior
 from estimators.diagnosis.hypotheses import Family
 from estimators.diagnosis.report import markdown
 from estimators.diagnosis.residuals import SmootherDiverged, estimate
 from estimators.diagnosis.rollout import Rollouts
-from estimators.diagnosis.selection import Scored, _time_posterior, encompassing, rivals
+from estimators.diagnosis.selection import Scored, encompassing, rivals
 from estimators.diagnosis.synthetic import synthesize, typical_effect
 from marine_envs.models import get_model
 from marine_envs.models.effects import Effect, ModelWithEffects
@@ -192,11 +193,11 @@ def test_a_change_time_the_record_cannot_date_is_the_middle_of_what_it_allows():
     quiet = (times >= 150) & (times <= 190)
     sse = 1000 + np.where(quiet, rng.uniform(0, 1, times.size), 50.0)
     sse[times == 188] = 999.0
-    low, median, high = _time_posterior(times, sse, sigma2=1.0)
+    low, median, high = time_posterior(times, sse, sigma2=1.0)
     assert 165 <= median <= 175 and 20 <= high - low <= 35
     # a sharp minimum dates the change to it
     times = np.arange(100.0, 231.0, 0.1)
-    low, median, high = _time_posterior(times, 1000 + 20 * np.abs(times - 165.0), sigma2=1.0)
+    low, median, high = time_posterior(times, 1000 + 20 * np.abs(times - 165.0), sigma2=1.0)
     assert median == pytest.approx(165.0, abs=0.2) and high - low < 0.5
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from marine_envs.models.effects import Effect
@@ -12,14 +13,35 @@ from .residuals import Residuals
 def explain(effect: Effect, scored: Any, residuals: Residuals) -> str:
     """One or two sentences a marine engineer can act on."""
     share = f"it removes {scored.alone:.0%} of the held-out prediction error beyond sensor noise"
-    return f"{describe(effect)}{_dating(effect, scored)}; {share}."
+    if effect.effect == "parameter_change":
+        return f"{describe_change(effect, scored.fitted.std, scored.fitted.details)}; {share}."
+    return f"{describe(effect)}; {share}."
 
 
-def _dating(effect: Effect, scored: Any) -> str:
-    """How closely the record dates a change (the 68 % interval of its time's posterior)."""
-    spread = scored.fitted.std.get("time", 0.0) if effect.effect == "parameter_change" else 0.0
-    return f" (give or take {spread:.0f} s: the record cannot date it closer)" \
-        if spread >= 1.0 else ""
+def describe_change(effect: Effect, std: Mapping[str, float], details: Mapping[str, Any]) -> str:
+    """A change in mid-record: when (with the std of its date), which equation, what changed
+    and by how much, before and after (the level before is the detector's
+    :class:`.changes.ChangePoint` in ``details["change"]``, when there is one)."""
+    p, t = effect.parameters, effect.target
+    spread = std.get("time")
+    when = f"t = {p['time']:.1f} s" + (f" (+- {spread:.{1 if spread < 10 else 0}f} s)"
+                                       if spread else "")
+    c, c_std = p["c"], std.get("c")
+    size = f"{c:+.3g}" + (f" +- {c_std:.2g}" if c_std else "")
+    change = details.get("change")
+    if p.get("what", "damping") == "force":
+        return (f"the forces on {t} change at {when}: from then on {t}'s equation needs a "
+                f"constant {size} per second" + (
+                    f" (its mean error goes from {change.before:+.3g} to "
+                    f"{change.before + c:+.3g})"
+                    if change is not None else ""))
+    text = (f"the damping of {t} changes at {when}: from then on {t}'s equation needs "
+            f"{size}*{t} ({'more' if c < 0 else 'less'} damping than before: a drag, mass or "
+            "added-mass change)")
+    if change is not None and change.before:
+        text += (f"; its damping derivative d({t}')/d{t} goes from {change.before:+.3g} to "
+                 f"{change.before + c:+.3g} 1/s ({c / change.before:+.0%})")
+    return text
 
 
 _DAMPING = {"linear_damping", "quadratic_damping", "nonlinear_damping"}
@@ -44,6 +66,8 @@ def separating_test(a: Effect, b: Effect) -> str:
 
 def describe(effect: Effect) -> str:
     """What the effect means for the vehicle, with its numbers."""
+    if effect.effect == "parameter_change":
+        return describe_change(effect, {}, {})
     p, t = effect.parameters, effect.target
     return {
         "current": f"a steady force or current the model lacks: {t}'s equation needs a constant "
@@ -65,9 +89,6 @@ def describe(effect: Effect) -> str:
         "nonlinear_restoring": f"the restoring force on {t} is not linear in "
                                f"{p.get('source')}: {p.get('c', 0):+.3g}*{p.get('source')}^3 "
                                f"({'stiffening' if p.get('c', 0) < 0 else 'softening'})",
-        "parameter_change": f"the dynamics of {t} change at t = {p.get('time', 0):.1f} s: from "
-                            f"then on its {p.get('what', 'damping')} changes by "
-                            f"{p.get('c', 0):+.3g}",
         "wave_frequency": f"an oscillation the model does not have drives {t}: narrow-band at "
                           f"{p.get('omega', 0):.3g} rad/s (period "
                           f"{6.283 / max(p.get('omega', 1e-9), 1e-9):.3g} s), damping ratio "

@@ -27,7 +27,8 @@ from .modes import model_modes
 from .residuals import Residuals, _output_matrix, displacements
 
 FloatArray = NDArray[np.float64]
-#: Parameter-change times tried: this many over the record (then refined on the final fit).
+#: Parameter-change times tried: this many over the record (then refined to one sample about
+#: the best, :mod:`.changes`).
 CHANGE_TIMES = 60
 #: Narrow-band motion is looked for below this frequency, rad/s (sea waves and the slow modes
 #: they excite; above it a peak is far more likely a numerical artefact than physics).
@@ -103,9 +104,10 @@ class Family:
 
 
 def all_families(res: Residuals) -> Iterator[Family]:
-    """Every family the catalogue allows for this model and these channels."""
+    """Every family the catalogue allows for this model and these channels, but the changes
+    in mid-record: those are detected and dated first (:mod:`.changes`), and only what is
+    detected is searched."""
     yield from state_families(res)
-    yield from change_families(res)
     yield from input_families(res)
     yield from bias_families(res)
     yield from wave_families(res)

@@ -492,10 +492,12 @@ def _running_mean(x: FloatArray, n: int) -> FloatArray:
 
 
 def _plot_parameter_change(plt: Any, diagnosis: Diagnosis, k: int) -> tuple[Any, str]:
-    """The target's equation error against time with the fitted step term; change time marked."""
+    """The target's equation error against time with the fitted step term; change time marked,
+    with its std."""
     res = diagnosis.residuals
     assert res is not None and diagnosis.selection is not None
-    effect = diagnosis.selection.findings[k].fitted.effect
+    fitted = diagnosis.selection.findings[k].fitted
+    effect, spread = fitted.effect, fitted.std.get("time", 0.0)
     i = res.model.state_names.index(effect.target)
     t = res.time[:-1]
     term = state_term(effect, res.model, res.midpoint, res.u[:-1], t)
@@ -503,12 +505,14 @@ def _plot_parameter_change(plt: Any, diagnosis: Diagnosis, k: int) -> tuple[Any,
     ax.plot(t, _partial_error(diagnosis, k, i), color="tab:blue", lw=0.5, label="equation error")
     ax.plot(t, term, color="tab:orange", lw=1.0, label="fitted term")
     ax.axvline(effect.parameters["time"], color="k", lw=1, ls="--", label="change time")
+    ax.axvspan(effect.parameters["time"] - spread, effect.parameters["time"] + spread,
+               color="k", alpha=0.12, lw=0, label="+- its std")
     ax.set_xlabel("time (s)")
     ax.set_ylabel(f"{effect.target} equation error {_rate_unit(res.model.state_units[i])}")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return fig, (f"equation error of {effect.target} against time with the fitted term, which "
-                 f"starts at t = {effect.parameters['time']:.1f} s")
+                 f"starts at t = {effect.parameters['time']:.1f} s (+- {spread:.1f} s)")
 
 
 def _plot_wave_forcing(plt: Any, diagnosis: Diagnosis, k: int) -> tuple[Any, str]:

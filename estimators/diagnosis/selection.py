@@ -30,19 +30,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
-from scipy.integrate import cumulative_trapezoid
 
 from marine_envs.models.effects import Effect
 
-from .hypotheses import Family, all_families, bias_term, change_families
+from . import changes
+from .hypotheses import Family, all_families, bias_term
 from .innovations import Innovations
 from .residuals import Residuals
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-#: Times tried in each pass of a change time's refinement (one sample apart when they span
-#: no more than this many samples).
-FINE_TIMES = 300
 
 
 @dataclass(frozen=True)
@@ -222,13 +219,18 @@ def select(residuals: Residuals, config: DiagnosisConfig = DiagnosisConfig()) ->
     findings: list[Scored] = []
     ranking: list[Scored] = []
     tried = 0
-    catalogue = list(all_families(residuals))
+    # a change in mid-record is detected and dated first (:mod:`.changes`), and only what it
+    # detects is searched, at its time; the changes it tried count as tried
+    detected = changes.detect(residuals, config.alpha)
+    catalogue = list(all_families(residuals)) + list(changes.proposed_families(residuals,
+                                                                               detected))
+    untried_changes = changes.examined(residuals) - len(detected)
     response = _cached_responses(innovations)
     for round_ in range(config.max_findings):
         accepted = [s.fitted for s in findings]
         before = evaluator.cross_validate(accepted)
         families = [f for f in catalogue if f.key not in {s.family.key for s in findings}]
-        tried = len(families)
+        tried = len(families) + untried_changes
         scored = [s for f in families if (s := _score(residuals, evaluator, accepted, before, f,
                                                       config, tried, response(f)))]
         scored.sort(key=lambda s: s.gain, reverse=True)
@@ -241,14 +243,12 @@ def select(residuals: Residuals, config: DiagnosisConfig = DiagnosisConfig()) ->
         if best is not None:
             block = int(round(config.block / residuals.dt))
             best = encompassing(best, scored, block, config.alpha)
+            best = yield_to_change(best, scored, block, config.alpha)
             best.rivals = rivals(best, scored, block, config.alpha)
         for s in scored:
             s.residual = None  # (T, m) each: kept only while the round is compared
         if best is None:
             break
-        if best.family.effect == "parameter_change":  # ranked on its best grid time's fit
-            best.fitted = fit_member(residuals, evaluator, accepted, best.family,
-                                     response(best.family))
         findings.append(best)
     if len(findings) > 1:
         _backfit(residuals, evaluator, findings)
@@ -280,11 +280,11 @@ def _score(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], before:
     t, p = gain_test(before, after, int(round(config.block / res.dt)))
     sigma2 = float(np.mean(before**2))  # per channel and sample
     b, a = float(np.sum(before**2)), float(np.sum(after**2))
-    fitted = fit_member(res, evaluator, accepted, family, G, search=True)
+    fitted = fit_member(res, evaluator, accepted, family, G)
     # a simpler term that explains as much is preferred: a BIC charge per extra parameter and
     # the description length of the member chosen (which source, delay, time, library term)
     charge = 0.5 * math.log(before.size) * (family.n_parameters - 1) \
-        + math.log(len(family.members))
+        + math.log(family.details.get("searched", len(family.members)))
     p = min(1.0, p * tried)
     return Scored(family, fitted, 1 - a / b, (b - a) / (2 * sigma2) - charge, t, p,
                   residual=after if p <= config.alpha else None)
@@ -315,6 +315,20 @@ def encompassing(best: Scored, scored: list[Scored], block: int, alpha: float) -
     return best
 
 
+def yield_to_change(best: Scored, scored: list[Scored], block: int, alpha: float) -> Scored:
+    """A change the detector found (:mod:`.changes`) against a steady term: the term must fit
+    both sides of the change, or it yields to the change, when the change predicts what the
+    term leaves and the term does not predict what the change leaves. The encompassing test
+    (:func:`encompassing`) leaves richer families out, since a change nests the steady term it
+    changes; a detected change has already beaten its equation's steady terms on the whole
+    record."""
+    if best.family.effect == "parameter_change":
+        return best
+    return next((s for s in scored if s.family.effect == "parameter_change"
+                 and s.residual is not None and s.gain > 0 and _explains(s, best, block, alpha)
+                 and not _explains(best, s, block, alpha)), best)
+
+
 def rivals(best: Scored, scored: list[Scored], block: int, alpha: float) -> list[Scored]:
     """The significant families of ``best``'s round that explain the record as well: neither
     predicts what the other leaves. Damping laws over one range of amplitudes, or a thrust
@@ -325,15 +339,12 @@ def rivals(best: Scored, scored: list[Scored], block: int, alpha: float) -> list
 
 
 def fit_member(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], family: Family,
-               G: FloatArray, rows: BoolArray | None = None, search: bool = False) -> Fitted:
+               G: FloatArray, rows: BoolArray | None = None) -> Fitted:
     """The family's best member and coefficient on ``rows`` (default: the whole record) given
-    the accepted terms, with standard deviations. A change time is refined about the best
-    grid time while ``search`` ranks the candidates, over the whole record for a finding
-    (:func:`_refined_change`)."""
+    the accepted terms, with standard deviations (a change's time: the detector's,
+    :mod:`.changes`)."""
     sse, coef, _ = evaluator.fit(accepted, G, family.free, rows)
     r = int(np.argmin(sse))
-    if family.effect == "parameter_change":
-        return _refined_change(res, evaluator, accepted, family, sse, rows, search)
     n_rows = int(rows.sum()) if rows is not None else len(evaluator.nu)
     sigma2 = max(float(sse[r]), 1e-300) / max(n_rows * evaluator.nu.shape[1], 1)
     std: dict[str, float] = {}
@@ -343,6 +354,8 @@ def fit_member(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], fam
         GG = float(sums["GG"][0] - sums["BG"][:, 0] @ np.linalg.pinv(sums["BB"])
                    @ sums["BG"][:, 0]) if sums["BB"].size else float(sums["GG"][0])
         std[family.coefficient] = math.sqrt(sigma2 / max(GG, 1e-300))  # type: ignore[index]
+        if "change" in family.details:
+            std["time"] = family.details["change"].time_std
     else:
         name = family.details["grid"]
         values = np.array([m[name] for m in family.members])
@@ -378,72 +391,6 @@ def _with_member(family: Family, r: int, parameters: dict[str, Any]) -> Family:
     members[r] = {**members[r], **parameters}
     return Family(family.effect, family.target, members, family.w, family.v,
                   family.coefficient, family.offset, family.n_parameters, family.details)
-
-
-def _refined_change(res: Residuals, evaluator: Evaluator, accepted: list[Fitted],
-                    family: Family, coarse: FloatArray, rows: BoolArray | None,
-                    search: bool = False) -> Fitted:
-    """A change time refined to one sample, about the best grid time (``search``: the
-    ranking's candidates) or over the whole grid's span (a finding: where the state a damping
-    change acts through is quiet the grid times fit alike, and the truth may be a dip narrower
-    than the grid's spacing beside them), :data:`FINE_TIMES` times at a pass. The time is the
-    median of its posterior over every pass (:func:`_time_posterior`), its std half the
-    posterior's central 68 %."""
-    times = np.asarray(family.details["times"])
-    best = int(np.argmin(coarse))
-    spacing = float(times[1] - times[0]) if len(times) > 1 else res.dt * 10
-    low, high = (times[best] - spacing, times[best] + spacing) if search \
-        else (times[0], times[-1])
-    what = family.members[best]["what"]
-    n_rows = int(rows.sum()) if rows is not None else len(evaluator.nu)
-    tried, fits = [], []  # every pass's times and sums of squares, for the posterior
-    while True:
-        step = max(res.dt, (high - low) / FINE_TIMES)
-        fine = np.arange(low, high + step / 2, step)
-        fine = fine[(fine > res.time[0]) & (fine < res.time[-1])]
-        sse = _change_fit(res, evaluator, accepted, family.target, what, fine, rows)[0]
-        k = int(np.argmin(sse))
-        tried.append(fine)
-        fits.append(sse)
-        if step <= res.dt * 1.001:
-            break
-        low, high = fine[k] - step, fine[k] + step
-    all_sse = np.concatenate(fits)
-    sigma2 = max(float(all_sse.min()), 1e-300) / max(n_rows * evaluator.nu.shape[1], 1)
-    low, median, high = _time_posterior(np.concatenate(tried), all_sse, sigma2)
-    time = res.time[int(np.argmin(np.abs(res.time - median)))]
-    sse, coef, G, local = _change_fit(res, evaluator, accepted, family.target, what,
-                                      np.array([time]), rows)
-    std = {"time": float(max((high - low) / 2, res.dt)),
-           "c": float(abs(coef[0]) / math.sqrt(max((all_sse.max() - sse[0]) / sigma2, 1.0)))}
-    return _fitted(res, local, 0, float(coef[0]), G[:, :, 0] * coef[0], std)
-
-
-def _change_fit(res: Residuals, evaluator: Evaluator, accepted: list[Fitted], target: str,
-                what: str, times: FloatArray, rows: BoolArray | None
-                ) -> tuple[FloatArray, FloatArray, FloatArray, Family]:
-    """Sums of squares, coefficients and responses of a ``what`` change at each of ``times``,
-    and its family."""
-    local = next(change_families(res, times=times, target=target, what=what))
-    G = res.innovations.response(local.w, local.v)  # type: ignore[union-attr]
-    sse, coef, _ = evaluator.fit(accepted, G, True, rows)
-    return sse, coef, G, local
-
-
-def _time_posterior(times: FloatArray, sse: FloatArray, sigma2: float
-                    ) -> tuple[float, float, float]:
-    """The 16 %, 50 % and 84 % points of a change time's posterior: a flat prior over the
-    times tried, the Gaussian likelihood ``exp(-(SSE - min) / 2 sigma2)`` between them.
-    Where the state the change acts through is quiet, the times across the quiet stretch fit
-    alike and the best of them is a guess; the median is the estimate of least expected
-    absolute error."""
-    t, first = np.unique(times, return_index=True)
-    density = np.exp(-(sse[first] - sse.min()) / (2 * sigma2))
-    mass = cumulative_trapezoid(density, t, initial=0.0)
-    if mass[-1] <= 0:  # one time tried
-        return float(t[0]), float(t[0]), float(t[0])
-    low, median, high = np.interp(np.array([0.16, 0.5, 0.84]) * mass[-1], mass, t)
-    return float(low), float(median), float(high)
 
 
 def _parabola(values: FloatArray, sse: FloatArray, r: int,
