@@ -51,8 +51,7 @@ from marine_envs.models import VehicleModel, get_model
 from marine_envs.models.effects import ActuatorStream, Effect, EffectModel, resonator
 from marine_envs.recording import Recording
 
-from .cases import ACCEPTANCE_VEHICLES, PARTIAL, TARGETS, Case, Entry, Outcome, build_effect, \
-    score
+from .cases import ACCEPTANCE_VEHICLES, PARTIAL, TARGETS, Case, Entry, Outcome, build_effect, score
 from .residuals import displacements
 from .result import Diagnosis
 from .synthetic import DEFAULT_DITHER_SHARE, DITHER_SHARE, REFERENCE, SEA, _gain, synthesize
@@ -632,7 +631,7 @@ def run_scenario(scenario: Scenario, timeout: float | None = TIMEOUT) -> dict[st
     stopped after ``timeout`` s of this process's CPU time (verdict ``timeout``)."""
     from .api import diagnose
 
-    recording, truth = record(scenario)
+    recording, truth = record(scenario)  # before any CPU limit: only the diagnosis is bounded
     case = Case(scenario.vehicle, truth, scenario.noise, scenario.seed, scenario.duration,
                 scenario.measured)
     start, cpu = time.perf_counter(), time.process_time()
@@ -698,3 +697,19 @@ class _cpu_limit:  # noqa: N801
     @staticmethod
     def _expire(number: int, frame: Any) -> None:
         raise Timeout
+
+
+def run_seed(seed: int, vehicles: Sequence[str] = VEHICLES,
+             generators: Sequence[str] = GENERATORS,
+             timeout: float | None = TIMEOUT) -> dict[str, Any]:
+    """:func:`draw` and :func:`run_scenario` with one BLAS thread: one benchmark case, the
+    same row wherever it runs (a process pool, a Ray worker). A draw that fails gives a row
+    of verdict ``draw failed`` with the reason."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        try:
+            scenario = draw(seed, vehicles, generators)
+        except (RuntimeError, FloatingPointError) as error:
+            return {"seed": seed, "verdict": "draw failed", "reason": str(error)}
+        return {"seed": seed, **run_scenario(scenario, timeout)}
