@@ -20,6 +20,7 @@ OS's entropy each run and printed (``--seeds`` replays them). A seed below
     python benchmarks/diagnosis_scenarios.py [--tuning] [--cases N] [--seeds 1,2,...]
         [--generators environment,synthesize] [--vehicles usv,rov] [--workers N]
         [--ray [ADDRESS]] [--timeout S] [--json OUT] [--docs [PAGE]]
+    python benchmarks/diagnosis_scenarios.py --report OUT.json [--docs [PAGE]]
 """
 
 from __future__ import annotations
@@ -30,9 +31,11 @@ import sys
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # _common, also under pytest
 
 import argparse  # noqa: E402
+import json  # noqa: E402
 import secrets  # noqa: E402
 from collections import Counter  # noqa: E402
 from collections.abc import Iterable, Iterator, Sequence  # noqa: E402
+from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 from _common import add_docs_option, benchmark_run, check_page_path  # noqa: E402
@@ -257,7 +260,10 @@ def parse(argv: Sequence[str]) -> argparse.Namespace:
                              "the one this machine belongs to), or on a local Ray")
     parser.add_argument("--timeout", type=float, default=TIMEOUT,
                         help=f"CPU seconds one diagnosis may take (default {TIMEOUT:.0f})")
-    parser.add_argument("--json", metavar="OUT", help="write every row as JSON")
+    parser.add_argument("--json", metavar="OUT",
+                        help="write every row as JSON (rewritten after each case)")
+    parser.add_argument("--report", metavar="JSON",
+                        help="no run: the tables of the rows in JSON (a --json output)")
     add_docs_option(parser, "diagnosis_scenarios")
     args = parser.parse_args(argv)
     args.generators = _names(args.generators, GENERATORS, "generator", parser)
@@ -276,6 +282,14 @@ def parse(argv: Sequence[str]) -> argparse.Namespace:
         if importlib.util.find_spec("ray") is None:
             parser.error("--ray needs Ray: pip install 'marine-envs[ray]'")
     check_page_path(parser, args.docs)
+    if args.report is not None:
+        try:
+            args.report_rows = json.loads(Path(args.report).read_text())["rows"]
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            parser.error(f"--report {args.report}: not a --json output of this benchmark "
+                         f"({error})")
+        args.seed_list = [r["seed"] for r in args.report_rows]
+        return args
     args.seed_list = (_seeds(args.seeds, parser) if args.seeds else
                       list(TUNING_SEEDS[:args.cases]) if args.tuning else
                       fresh_seeds(args.cases))
@@ -286,31 +300,40 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = parse(argv)
     seeds: list[int] = args.seed_list
-    print(f"seeds ({'tuning' if args.tuning else 'given' if args.seeds else 'fresh'}): "
-          f"{','.join(map(str, seeds))}", flush=True)
+    if args.report is None:
+        print(f"seeds ({'tuning' if args.tuning else 'given' if args.seeds else 'fresh'}): "
+              f"{','.join(map(str, seeds))}", flush=True)
     with benchmark_run("diagnosis_scenarios", argv) as bench:
-        bench.note(f"Seeds: {','.join(map(str, seeds))} (replay with --seeds); "
-                   f"{'Ray' if args.ray is not None else f'{args.workers} process(es)'}, "
-                   f"timeout {args.timeout:.0f} CPU-s per diagnosis.")
-        rows = collect(run_rows(seeds, args.vehicles, args.generators, args.timeout,
-                                args.workers, args.ray or None, args.ray is not None),
-                       len(seeds))
+        if args.report is not None:
+            rows = args.report_rows
+            bench.note(f"The rows of {args.report} ({len(rows)} cases).")
+        else:
+            bench.note(f"Seeds: {','.join(map(str, seeds))} (replay with --seeds); "
+                       f"{'Ray' if args.ray is not None else f'{args.workers} process(es)'}, "
+                       f"timeout {args.timeout:.0f} CPU-s per diagnosis.")
+            results = run_rows(seeds, args.vehicles, args.generators, args.timeout,
+                               args.workers, args.ray or None, args.ray is not None)
+            rows = collect(results, seeds, args.json)
         report(bench, rows)
-    if args.json:
-        write_json(args.json, {"seeds": seeds, "rows": rows}, default=str)
     if args.docs:
         bench.write_page(args.docs, TITLE, ABOUT)
     return 0
 
 
-def collect(results: Iterable[dict[str, Any]], total: int) -> list[dict[str, Any]]:
-    """The rows, with a progress bar, in seed order."""
-    rows = []
-    with tqdm(total=total, desc="cases", unit="case") as bar:
+def collect(results: Iterable[dict[str, Any]], seeds: Sequence[int],
+            out: str | None) -> list[dict[str, Any]]:
+    """The rows in seed order, with a progress bar; written to ``out`` (JSON) after every case,
+    so that a run stopped early keeps what it did (``--report`` makes its tables)."""
+    rows: list[dict[str, Any]] = []
+    with tqdm(total=len(seeds), desc="cases", unit="case") as bar:
         for row in results:
             rows.append(row)
             bar.set_postfix_str(row["verdict"])
             bar.update()
+            if out:
+                write_json(out, {"seeds": list(seeds), "rows": sorted(rows,
+                                                                       key=lambda r: r["seed"]),
+                                 "complete": len(rows) == len(seeds)}, default=str)
     return sorted(rows, key=lambda r: r["seed"])
 
 

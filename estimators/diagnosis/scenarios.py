@@ -36,6 +36,7 @@ simulated, noise-free; the size is redrawn otherwise). The generators:
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib
 import math
 import time
@@ -234,13 +235,14 @@ def effect_entries(vehicle: str, generator: str,
     return entries
 
 
+@functools.cache
 def commands_recorded(vehicle: str) -> bool:
     """Whether the environment reports the commanded input (``info["action_commanded"]``)."""
     import gymnasium as gym
 
     import marine_envs  # noqa: F401  (registers the environments)
 
-    env = gym.make(ENV_IDS[vehicle])
+    env = gym.make(ENV_IDS[vehicle], disable_env_checker=True)
     _, info = env.reset(seed=0)
     _, _, _, _, info = env.step(np.zeros(env.action_space.shape, dtype=np.float32))
     env.close()
@@ -348,7 +350,8 @@ def _env_channels(vehicle: str) -> tuple[str, ...]:
 
     import marine_envs  # noqa: F401
 
-    return tuple(gym.make(ENV_IDS[vehicle]).unwrapped.sim.sensors.channels)
+    env = gym.make(ENV_IDS[vehicle], disable_env_checker=True)
+    return tuple(env.unwrapped.sim.sensors.channels)
 
 
 def _references(vehicle: VehicleModel, kind: str, steps: int, dt: float,
@@ -407,7 +410,7 @@ def _environment(scenario: Scenario, noise: bool) -> Made:
     module = importlib.import_module(f"marine_envs.envs.{vehicle_name}")
     default = module.DEFAULT_SENSORS["noise_std"]
     sea = {k: tuple(v) if isinstance(v, list) else v for k, v in scenario.sea.items()}
-    probe = gym.make(env_id, **sea)
+    probe = gym.make(env_id, disable_env_checker=True, **sea)
     dt = probe.unwrapped.sim.dt
     steps = int(round(scenario.duration / dt)) + 1
     channels = tuple(probe.unwrapped.sim.sensors.channels)
@@ -417,7 +420,8 @@ def _environment(scenario: Scenario, noise: bool) -> Made:
     kwargs = {**sea, "noise_std": noise_std, "effects": list(scenario.effects)}
     if not noise:
         kwargs["quantization"] = None
-    env = gym.make(env_id, max_episode_steps=steps + 1, **kwargs)
+    env = gym.make(env_id, max_episode_steps=steps + 1,
+                   disable_env_checker=True, **kwargs)
     sim = env.unwrapped.sim
     model = get_model(vehicle_name)
     K = _gain(model, dt)
