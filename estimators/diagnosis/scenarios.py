@@ -401,72 +401,71 @@ def _random_steps(n: int, steps: int, dt: float, hold: tuple[float, float],
 def _environment(scenario: Scenario, noise: bool) -> Made:
     """The environment with the effects under its LQR autopilot (true state) and a manoeuvre;
     the commands recorded."""
-    import gymnasium as gym
-
-    import marine_envs  # noqa: F401
-
-    vehicle_name = scenario.vehicle
-    env_id = ENV_IDS[vehicle_name]
-    module = importlib.import_module(f"marine_envs.envs.{vehicle_name}")
-    default = module.DEFAULT_SENSORS["noise_std"]
-    sea = {k: tuple(v) if isinstance(v, list) else v for k, v in scenario.sea.items()}
-    probe = gym.make(env_id, disable_env_checker=True, **sea)
-    dt = probe.unwrapped.sim.dt
+    env, channels = _make_env(scenario, noise)
+    sim, model = env.unwrapped.sim, get_model(scenario.vehicle)
+    dt = sim.dt
     steps = int(round(scenario.duration / dt)) + 1
-    channels = tuple(probe.unwrapped.sim.sensors.channels)
-    scale = scenario.noise if noise else 0.0
-    noise_std = {c: scale * (default[c] if isinstance(default, Mapping) else default)
-                 for c in channels}
-    kwargs = {**sea, "noise_std": noise_std, "effects": list(scenario.effects)}
-    if not noise:
-        kwargs["quantization"] = None
-    env = gym.make(env_id, max_episode_steps=steps + 1,
-                   disable_env_checker=True, **kwargs)
-    sim = env.unwrapped.sim
-    model = get_model(vehicle_name)
     K = _gain(model, dt)
     rng = np.random.default_rng([scenario.seed, 1])
     x_ref = _references(model, scenario.manoeuvre, steps, dt, rng)
     low, high = model.u_bounds
-    share = DITHER_SHARE.get(vehicle_name, DEFAULT_DITHER_SHARE) * scenario.dither
+    share = DITHER_SHARE.get(model.name, DEFAULT_DITHER_SHARE) * scenario.dither
     dither = _random_steps(len(low), steps, dt, (1.0, 4.0), rng) * share * (high - low) / 2
-    free = [model.state_names.index(n) for n in UNREGULATED.get(vehicle_name, ())]
+    free = [model.state_names.index(n) for n in UNREGULATED.get(model.name, ())]
     act = sim.actuation
-    allocation = None if act.matrix is None else np.linalg.pinv(act.matrix)
+    to_actuators = np.eye(len(low)) if act.matrix is None else np.linalg.pinv(act.matrix)
     mid, half = (act.high + act.low) / 2, (act.high - act.low) / 2
-    recorded = [model.disturbance_names.index(c) for c in COMMANDS.get(vehicle_name, ())]
+    commands = COMMANDS.get(model.name, ())
+    logged = [model.disturbance_names.index(c) for c in commands]
+    times, inputs, seen, states, recorded = [], [], [], [], []
     obs, info = env.reset(seed=scenario.seed)
-    rows_t, rows_u, rows_y, rows_x, rows_d = [], [], [], [], []
     for k in range(steps):
         x = np.asarray(info["state"], dtype=float)
         error = x - x_ref[k]
         error[free] = 0.0
         u = np.clip(model.u0 - K @ error + dither[k], low, high)
-        action = np.clip(((u if allocation is None else allocation @ u) - mid) / half, -1, 1)
-        seen, now = obs, info["time"]
-        obs, _, terminated, _, info = env.step(action.astype(np.float32))
-        commanded = info.get("action_commanded", u)
-        rows_t.append(now), rows_u.append(np.asarray(commanded, float))
-        rows_y.append(np.asarray(seen, float)), rows_x.append(x)
-        rows_d.append(np.asarray(info["disturbance"], float)[recorded])
+        action = np.clip((to_actuators @ u - mid) / half, -1, 1).astype(np.float32)
+        times.append(info["time"])
+        seen.append(np.asarray(obs, dtype=float))
+        states.append(x)
+        obs, _, terminated, _, info = env.step(action)
+        inputs.append(np.asarray(info.get("action_commanded", u), dtype=float))
+        recorded.append(np.asarray(info["disturbance"], dtype=float)[logged])
         if terminated:
-            raise FloatingPointError(f"the {vehicle_name} left its limits at t={now:.1f} s")
+            raise FloatingPointError(f"the {model.name} left its limits at t={times[-1]:.1f} s")
     env.close()
-    states = np.array(rows_x)
-    y = np.array(rows_y)
     keep = list(scenario.measured or channels)
-    columns = [channels.index(c) for c in keep]
-    clean = _outputs(model, states, keep, scenario.effects)
-    clean[:, [i for i, c in enumerate(keep) if c == "psi"]] = np.unwrap(
-        clean[:, [i for i, c in enumerate(keep) if c == "psi"]], axis=0)
-    d = np.array(rows_d).reshape(len(rows_t), len(recorded))
-    meta = _meta(scenario, "environment", env=env_id)
-    rec = Recording.from_arrays(vehicle_name, np.array(rows_t), np.array(rows_u),
-                                {c: y[:, j] for c, j in zip(keep, columns, strict=True)},
-                                meta=meta,
-                                disturbances={c: d[:, j] for j, c in
-                                              enumerate(COMMANDS.get(vehicle_name, ()))})
-    return Made(rec, clean)
+    y, d = np.array(seen), np.array(recorded).reshape(steps, len(logged))
+    rec = Recording.from_arrays(
+        model.name, np.array(times), np.array(inputs),
+        {c: y[:, channels.index(c)] for c in keep},
+        meta=_meta(scenario, "environment", env=ENV_IDS[model.name]),
+        disturbances={c: d[:, j] for j, c in enumerate(commands)})
+    return Made(rec, _outputs(model, np.array(states), keep, scenario.effects))
+
+
+def _make_env(scenario: Scenario, noise: bool) -> tuple[Any, tuple[str, ...]]:
+    """The scenario's environment (its sea, the effects, the sensors' noise times
+    ``scenario.noise``, or no noise nor quantization) and its sensor channels."""
+    import gymnasium as gym
+
+    import marine_envs  # noqa: F401  (registers the environments)
+
+    env_id = ENV_IDS[scenario.vehicle]
+    default = importlib.import_module(f"marine_envs.envs.{scenario.vehicle}") \
+        .DEFAULT_SENSORS["noise_std"]
+    sea = {k: tuple(v) if isinstance(v, list) else v for k, v in scenario.sea.items()}
+    channels = _env_channels(scenario.vehicle)
+    scale = scenario.noise if noise else 0.0
+    sensors: dict[str, Any] = {"noise_std": {
+        c: scale * (default[c] if isinstance(default, Mapping) else default) for c in channels}}
+    if not noise:
+        sensors["quantization"] = None
+    dt = gym.make(env_id, disable_env_checker=True, **sea).unwrapped.sim.dt
+    steps = int(round(scenario.duration / dt)) + 1
+    env = gym.make(env_id, max_episode_steps=steps + 1, disable_env_checker=True,
+                   effects=list(scenario.effects), **sea, **sensors)
+    return env, channels
 
 
 def _outputs(model: VehicleModel, states: np.ndarray, channels: Sequence[str],
