@@ -20,7 +20,7 @@ OS's entropy each run and printed (``--seeds`` replays them). A seed below
     python benchmarks/diagnosis_scenarios.py [--tuning] [--cases N] [--seeds 1,2,...]
         [--generators environment,synthesize] [--vehicles usv,rov] [--workers N]
         [--ray [ADDRESS]] [--timeout S] [--json OUT] [--docs [PAGE]]
-    python benchmarks/diagnosis_scenarios.py --report OUT.json [--docs [PAGE]]
+    python benchmarks/diagnosis_scenarios.py --report OUT.json [MORE.json ...] [--docs [PAGE]]
 """
 
 from __future__ import annotations
@@ -262,8 +262,8 @@ def parse(argv: Sequence[str]) -> argparse.Namespace:
                         help=f"CPU seconds one diagnosis may take (default {TIMEOUT:.0f})")
     parser.add_argument("--json", metavar="OUT",
                         help="write every row as JSON (rewritten after each case)")
-    parser.add_argument("--report", metavar="JSON",
-                        help="no run: the tables of the rows in JSON (a --json output)")
+    parser.add_argument("--report", metavar="JSON", nargs="+",
+                        help="no run: the tables of the rows in these --json outputs")
     add_docs_option(parser, "diagnosis_scenarios")
     args = parser.parse_args(argv)
     args.generators = _names(args.generators, GENERATORS, "generator", parser)
@@ -283,11 +283,13 @@ def parse(argv: Sequence[str]) -> argparse.Namespace:
             parser.error("--ray needs Ray: pip install 'marine-envs[ray]'")
     check_page_path(parser, args.docs)
     if args.report is not None:
-        try:
-            args.report_rows = json.loads(Path(args.report).read_text())["rows"]
-        except (OSError, ValueError, KeyError, TypeError) as error:
-            parser.error(f"--report {args.report}: not a --json output of this benchmark "
-                         f"({error})")
+        args.report_rows = []
+        for path in args.report:
+            try:
+                args.report_rows += json.loads(Path(path).read_text())["rows"]
+            except (OSError, ValueError, KeyError, TypeError) as error:
+                parser.error(f"--report {path}: not a --json output of this benchmark "
+                             f"({error})")
         args.seed_list = [r["seed"] for r in args.report_rows]
         return args
     args.seed_list = (_seeds(args.seeds, parser) if args.seeds else
@@ -306,7 +308,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with benchmark_run("diagnosis_scenarios", argv) as bench:
         if args.report is not None:
             rows = args.report_rows
-            bench.note(f"The rows of {args.report} ({len(rows)} cases).")
+            bench.note(f"The rows of {', '.join(args.report)} ({len(rows)} cases).")
         else:
             bench.note(f"Seeds: {','.join(map(str, seeds))} (replay with --seeds); "
                        f"{'Ray' if args.ray is not None else f'{args.workers} process(es)'}, "
