@@ -18,19 +18,25 @@ and kept only if it changes the motion by at least :data:`MIN_CHANGE` RMS (both 
 simulated, noise-free; the size is redrawn otherwise). The generators:
 
 * ``environment``: the Gymnasium environment with ``effects=`` (its own sea, wind or current,
-  sensors, integrator), under the LQR autopilot of its task weights on the true state (an ideal
-  observer; the DP vessel's sensors hold no low-frequency position) plus a trial manoeuvre:
-  course changes, a zigzag of the set-point, set-point ramps, or holding course; the inputs
-  recorded are the commands. The environment applies actuator effects inside the step and
-  reports the applied input: unless it also reports ``info["action_commanded"]``, only state
-  effects (the time-invariant ones an environment takes) and sensor biases are drawn;
-* ``synthesize``: :func:`.synthetic.synthesize`, the diagnosis's own generator;
+  sensors with their noise times the draw's factor, integrator), under the LQR autopilot of its
+  task weights (the design ``synthesize`` uses) on the true state (an ideal observer; the DP
+  vessel's sensors hold no low-frequency position) plus a trial manoeuvre: course changes, a
+  zigzag of the set-point, set-point ramps, or holding course, with or without a random-step
+  dither. The inputs recorded are the commands this loop sends, but ``marine simulate`` records
+  the applied input, in which an actuator effect has already acted: unless the environment
+  reports ``info["action_commanded"]``, only state effects (the time-invariant ones an
+  environment takes) and sensor biases are drawn;
+* ``synthesize``: :func:`.synthetic.synthesize`, the diagnosis's own generator (sensor noise
+  5 % of each channel's spread times the draw's factor, as for the next two);
 * ``open_loop``: the nonlinear model plus effects under random-step (PRBS-like) inputs and no
   controller, on the vehicles whose linearisation is stable (not the hydrofoil or the ROV);
-* ``independent``: written here, sharing no code path with ``synthesize``: an LQR of the
-  model's own linearisation (scipy's hold and Riccati solver), set-point ramps, a multisine dither,
-  a first-order filtered sea, fixed-step RK4 of the nonlinear model plus effects, and white
-  sensor noise.
+* ``independent``: written here, sharing no code with ``synthesize`` (only the sizes of its
+  sea and set-points): an LQR of the model's own linearisation (scipy's hold and Riccati
+  solver), set-point ramps, a multisine dither, a first-order filtered sea, fixed-step RK4 of
+  the nonlinear model plus effects, and white sensor noise.
+
+:func:`run_seed` is one benchmark case (``benchmarks/diagnosis_scenarios.py``): the draw, the
+record, the diagnosis bounded to :data:`TIMEOUT` s of CPU time, and its score.
 """
 
 from __future__ import annotations
