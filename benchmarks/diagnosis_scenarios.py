@@ -68,7 +68,8 @@ effect and target first, the key parameter within 30 %), wrong, missed (no findi
 (reasons counted), timeout; effect-free records: false findings (confidence >= 0.5). Tuning
 seeds (0-199) are the ones the diagnosis may be tuned on; fresh seeds are drawn from the OS's
 entropy each run and never tuned on: the two splits are reported apart, beside the issue's
-acceptance thresholds."""
+acceptance thresholds (about 5 draws in 18 are environment recordings: its own threshold of 60
+effect cases wants `--generators environment`)."""
 
 
 # -- seeds and running ----------------------------------------------------------------------------
@@ -137,7 +138,8 @@ def _reason(row: dict[str, Any]) -> str:
     for stop in (";", " (", ": "):
         if stop in reason[12:]:
             reason = reason[:12 + reason[12:].index(stop)]
-    return f"{row['verdict']}: {reason[:100]}"
+    kind = "effect" if row["true"] else "no effect"
+    return f"{row['verdict']} ({kind}): {reason[:100]}"
 
 
 def acceptance(rows: Sequence[dict[str, Any]]) -> str:
