@@ -285,13 +285,15 @@ def parse(argv: Sequence[str]) -> argparse.Namespace:
             parser.error("--ray needs Ray: pip install 'marine-envs[ray]'")
     check_page_path(parser, args.docs)
     if args.report is not None:
-        args.report_rows = []
+        by_seed: dict[int, dict[str, Any]] = {}
         for path in args.report:
             try:
-                args.report_rows += json.loads(Path(path).read_text())["rows"]
+                rows = json.loads(Path(path).read_text())["rows"]
             except (OSError, ValueError, KeyError, TypeError) as error:
                 parser.error(f"--report {path}: not a --json output of this benchmark "
                              f"({error})")
+            by_seed.update({r["seed"]: r for r in rows})  # a seed is one case: kept once
+        args.report_rows = [by_seed[s] for s in sorted(by_seed)]
         args.seed_list = [r["seed"] for r in args.report_rows]
         return args
     args.seed_list = (_seeds(args.seeds, parser) if args.seeds else
