@@ -41,12 +41,15 @@ record, the diagnosis bounded to :data:`TIMEOUT` s of CPU time, and its score.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import importlib
 import math
+import signal
+import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -677,35 +680,25 @@ def verdict(outcome: Outcome, diagnosis: Diagnosis, timed_out: bool = False) -> 
     return "wrong" if outcome.found else "missed"
 
 
-class _cpu_limit:  # noqa: N801
-    """Raise :class:`Timeout` after ``seconds`` of this process's CPU time (SIGPROF; only in
-    the main thread, where signals are delivered; elsewhere no limit)."""
+@contextlib.contextmanager
+def _cpu_limit(seconds: float | None) -> Iterator[None]:
+    """Raise :class:`Timeout` in the block after ``seconds`` of this process's CPU time
+    (SIGPROF; in the main thread only, where signals are delivered; elsewhere no limit)."""
+    if not seconds or threading.current_thread() is not threading.main_thread() \
+            or not hasattr(signal, "setitimer"):
+        yield
+        return
 
-    def __init__(self, seconds: float | None) -> None:
-        self.seconds = seconds
-        self.armed = False
-
-    def __enter__(self) -> None:
-        import signal
-        import threading
-
-        if not self.seconds or threading.current_thread() is not threading.main_thread() \
-                or not hasattr(signal, "setitimer"):
-            return
-        self.before = signal.signal(signal.SIGPROF, self._expire)
-        signal.setitimer(signal.ITIMER_PROF, self.seconds)
-        self.armed = True
-
-    def __exit__(self, *exc: object) -> None:
-        import signal
-
-        if self.armed:
-            signal.setitimer(signal.ITIMER_PROF, 0)
-            signal.signal(signal.SIGPROF, self.before)
-
-    @staticmethod
-    def _expire(number: int, frame: Any) -> None:
+    def expire(number: int, frame: Any) -> None:
         raise Timeout
+
+    before = signal.signal(signal.SIGPROF, expire)
+    signal.setitimer(signal.ITIMER_PROF, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_PROF, 0)
+        signal.signal(signal.SIGPROF, before)
 
 
 def run_seed(seed: int, vehicles: Sequence[str] = VEHICLES,
