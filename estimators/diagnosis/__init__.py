@@ -29,7 +29,8 @@ and for both:
 * :mod:`.api` - :func:`diagnose`: the checks of its inputs, and which way a record is judged;
 * :mod:`.report` - the Markdown report with figures (:mod:`.report_format`: what both share);
 * :mod:`.synthetic` - closed-loop recordings of any model with effects added;
-* :mod:`.cases` - the seeded acceptance set and how a diagnosis is scored on it.
+* :mod:`.cases` - the seeded acceptance set and how a diagnosis is scored on it;
+* :mod:`.scenarios` - cases drawn fresh from a seed: vehicle, effect, sea, sensors, generator.
 """
 
 from .api import check, diagnose, read_params
