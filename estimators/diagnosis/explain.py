@@ -12,6 +12,9 @@ from .residuals import Residuals
 def explain(effect: Effect, scored: Any, residuals: Residuals) -> str:
     """One or two sentences a marine engineer can act on."""
     share = f"it removes {scored.alone:.0%} of the held-out prediction error beyond sensor noise"
+    if getattr(scored, "on_innovations", False):  # an actuator effect, an unmeasured state
+        share = (f"it removes {scored.innovation_gain:.1%} of the held-out one-step innovations "
+                 f"(its few-second predictions: {scored.alone:+.0%})")
     return f"{describe(effect)}{_dating(effect, scored)}; {share}."
 
 
