@@ -64,6 +64,9 @@ DETECTABLE_SHARE = 0.15
 #: Bonferroni correction (0.01 over about 100 families, z = 3.7), and the held-out
 #: confirmation's (z = 2.3 on the last 30 % is 4.2 over the whole record), with a margin.
 DETECTABLE_Z = 5.0
+#: A record whose best channel is this many times short of :data:`DETECTABLE_Z` (it would
+#: take this squared times the record) shows no motion beyond the noise: excite it instead.
+HOPELESS = 5.0
 #: The motion's variance must exceed the sensor noise's by this many sampling deviations of
 #: their ratio (2.8 / sqrt(samples) for white noise, whose deviation is estimated from fourth
 #: differences: 200 draws each of 300-30000 samples), or the channel is taken as still.
@@ -207,7 +210,7 @@ class Excitation:
         shortfall = DETECTABLE_Z / max(self.z, 1e-3)
         still = [name for name, u in zip(recording.input_names, recording.inputs.T,
                                          strict=True) if not np.ptp(u[np.isfinite(u)]) > 0]
-        if self.z <= 0.1:
+        if shortfall > HOPELESS:
             motion = ("no measured channel moves beyond its sensor noise "
                       f"({', '.join(recording.measured_names)})")
             advice = "excite the vehicle (inputs, a release from an offset) and record again"
