@@ -497,8 +497,9 @@ def _confirm(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
     validated again.
 
     An actuator effect or a term on a state no channel measures improves the held-out data
-    when it reduces the held-out innovations (:func:`judged_on_innovations`), unless it makes
-    the held-out predictions significantly worse (:data:`WORSE_PREDICTIONS`)."""
+    when it reduces the held-out innovations (:func:`judged_on_innovations`); the term on an
+    unmeasured state, unless it makes the held-out predictions significantly worse
+    (:data:`WORSE_PREDICTIONS`)."""
     selection, res = diagnosis.selection, diagnosis.residuals
     assert selection is not None and res is not None
     reasons = {k: _unconfirmed_because(s, res, config) for k, s in enumerate(selection.findings)}
@@ -523,7 +524,7 @@ def _unconfirmed_because(scored: Scored, res: Residuals, config: DiagnosisConfig
     if judged_on_innovations(scored.effect, res):
         if scored.innovation_gain <= 0:
             return "refitted on the first part, it does not reduce the held-out innovations"
-        if scored.alone_z < -WORSE_PREDICTIONS:
+        if scored.alone_z < -WORSE_PREDICTIONS and not feedback.is_input_effect(scored.effect):
             return (f"refitted on the first part, it makes the held-out "
                     f"{config.horizon:g}-s predictions worse ({scored.alone:+.0%}, "
                     f"{-scored.alone_z:.1f} standard errors)")
