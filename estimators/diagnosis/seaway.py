@@ -68,9 +68,12 @@ DETECTABLE_Z = 5.0
 #: take this squared times the record) shows no motion beyond the noise: excite it instead.
 HOPELESS = 5.0
 #: The motion's variance must exceed the sensor noise's by this many sampling deviations of
-#: their ratio (2.8 / sqrt(samples) for white noise, whose deviation is estimated from fourth
-#: differences: 200 draws each of 300-30000 samples), or the channel is taken as still.
+#: their ratio, or the channel is taken as still.
 STILL_DEVIATIONS = 3.0
+#: The sampling deviation of that ratio for white noise, times sqrt(samples): its deviation is
+#: estimated from fourth differences (:func:`.residuals.white_noise_std`); 2.7-2.8 over 200
+#: draws each of 300, 1200, 3000 and 30000 samples.
+NOISE_RATIO_SPREAD = 2.8
 #: A model whose predictions are this many times (RMS) worse than holding the last sample does
 #: not describe the recording, unless its findings bring them back within.
 WORSE_THAN_HOLDING = 2.0
@@ -209,15 +212,15 @@ class Excitation:
         """Why the record cannot be judged, and what would make it judgeable."""
         shortfall = DETECTABLE_Z / max(self.z, 1e-3)
         still = [name for name, u in zip(recording.input_names, recording.inputs.T,
-                                         strict=True) if not np.ptp(u[np.isfinite(u)]) > 0]
+                                         strict=True) if not _moves(u[np.isfinite(u)])]
         if shortfall > HOPELESS:
             motion = ("no measured channel moves beyond its sensor noise "
                       f"({', '.join(recording.measured_names)})")
             advice = "excite the vehicle (inputs, a release from an offset) and record again"
         else:
             motion = (f"an effect changing the motion by {DETECTABLE_SHARE:.0%} would stand "
-                      f"{self.z:.1f} standard errors out of the sensor noise at best ({self.channel}"
-                      f"), {DETECTABLE_Z:g} are needed")
+                      f"{self.z:.1f} standard errors out of the sensor noise at best "
+                      f"({self.channel}), {DETECTABLE_Z:g} are needed")
             advice = (f"record {shortfall**2:.1f}x as long (at least "
                       f"{self.duration * shortfall**2:.0f} s), or excite the vehicle so that "
                       f"{self.channel} moves {shortfall:.1f}x as much")
@@ -238,12 +241,17 @@ def excitation(recording: Recording) -> Excitation:
         if len(y) < 5:
             continue
         sigma = float(white_noise_std(y[:, None])[0])
-        ratio = float(np.var(y)) / sigma**2 - 1 - STILL_DEVIATIONS * 2.8 / math.sqrt(len(y))
+        ratio = float(np.var(y)) / sigma**2 - 1 \
+            - STILL_DEVIATIONS * NOISE_RATIO_SPREAD / math.sqrt(len(y))
         accumulated = math.sqrt(max(ratio, 0.0) * len(y))  # A / sigma * sqrt(N)
         if DETECTABLE_SHARE * accumulated > best.z:
             best = replace(best, channel=name, z=DETECTABLE_SHARE * accumulated,
                            smallest=DETECTABLE_Z / accumulated)
     return best
+
+
+def _moves(u: FloatArray) -> bool:
+    return bool(u.size) and float(np.ptp(u)) > 0
 
 
 def _worse_than_holding(rollouts: Rollouts, errors: FloatArray, rows: BoolArray) -> float:
