@@ -464,7 +464,7 @@ def _validate(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
     selection.validated_errors = ro.errors(effects, forcing, shift)
     selection.combined_improvement = float(ro.improvement(before, selection.validated_errors))
     for finding, scored in zip(diagnosis.findings, selection.findings, strict=True):
-        finding.improvement = scored.innovation_gain if scored.on_innovations else scored.alone
+        finding.improvement = _improvement(scored)
         finding.explanation = explain(scored.fitted.effect, scored, res)  # quotes it
     diagnosis.fit = {
         "before": {"rmse": ro.rmse([])},
@@ -478,8 +478,14 @@ def _validate(diagnosis: Diagnosis, config: DiagnosisConfig) -> None:
                            for e in effects if not ro.carries(e))),
         "expected_from_sea": round(ro.sea_share(before), 4),
         "terms": [{"effect": s.fitted.effect.effect, "target": s.fitted.effect.target,
-                   "improvement": s.alone} for s in selection.findings],
+                   "improvement": _improvement(s)} for s in selection.findings],
     }
+
+
+def _improvement(scored: Scored) -> float:
+    """A term's held-out improvement on the horizon that fits it (:func:`judged_on_innovations`):
+    the share of the held-out innovations it removes, or of the prediction error."""
+    return round(scored.innovation_gain, 4) if scored.on_innovations else scored.alone
 
 
 def _held_out_test(res: Residuals, fitted: Sequence[Fitted], k: int, held_out: BoolArray,
