@@ -13,6 +13,9 @@ from .residuals import Residuals
 def explain(effect: Effect, scored: Any, residuals: Residuals) -> str:
     """One or two sentences a marine engineer can act on."""
     share = f"it removes {scored.alone:.0%} of the held-out prediction error beyond sensor noise"
+    if getattr(scored, "on_innovations", False):  # an actuator effect, an unmeasured state
+        share = (f"it removes {scored.innovation_gain:.1%} of the held-out one-step innovations "
+                 f"(its few-second predictions: {scored.alone:+.0%})")
     if effect.effect == "parameter_change":
         return f"{describe_change(effect, scored.fitted.std, scored.fitted.details)}; {share}."
     return f"{describe(effect)}; {share}."

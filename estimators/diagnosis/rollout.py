@@ -154,6 +154,21 @@ class Rollouts:
         excess = max(b - floor, 0.05 * b)
         return min((b - a) / excess, 1.0) if excess > 0 else 0.0
 
+    def improvement_z(self, before: FloatArray, after: FloatArray, block: float) -> float:
+        """How many standard errors ``after`` improves the held-out predictions over ``before``
+        (per-start errors as from :meth:`errors`; negative: worse): the summed error
+        difference over its spread across ``block``-s blocks of starts, which the overlapping
+        horizons and the sea make dependent."""
+        d = (before - after)[self.held]
+        if not d.size:
+            return 0.0
+        stride = float(self.res.time[self.starts[1]] - self.res.time[self.starts[0]]) \
+            if len(self.starts) > 1 else self.res.dt
+        size = max(1, int(round(block / stride)))
+        blocks = np.add.reduceat(d, np.arange(0, len(d), size))
+        scale = float(np.sqrt(np.sum(blocks**2)))
+        return float(d.sum() / scale) if scale > 0 else 0.0
+
     def sea_share(self, before: FloatArray) -> float:
         """The share of the held-out error in excess of the sensor noise that the model's own
         disturbance model expects (0 for a model without one)."""

@@ -103,6 +103,12 @@ class Scored:
     confidence: float = 0.0
     alone: float = 0.0  # validation improvement of this term alone (set by the api)
     held_out_p: float = 0.0  # does it, fitted on the first part, predict the rest? (by the api)
+    #: the share of the held-out whitened innovations' sum of squares it removes so (by the api)
+    innovation_gain: float = 0.0
+    #: how many standard errors its held-out predictions improve (negative: worse; by the api)
+    alone_z: float = 0.0
+    #: whether its held-out improvement is that of the innovations, not of the predictions
+    on_innovations: bool = False
     #: its held-out innovations ``(T, m)`` while its round is compared (significant ones)
     residual: FloatArray | None = field(default=None, repr=False)
     #: significant families of its round the record cannot tell from it (:func:`rivals`)
