@@ -7,6 +7,7 @@ seaway, judged by the nominal filter's innovations:
 
 * :mod:`.innovations` - the nominal filter's whitened innovations and their sensitivities;
 * :mod:`.residuals` - the nominal smoother, equation errors and the sea's noise model;
+* :mod:`.changes` - changes in mid-record detected and dated on the innovations;
 * :mod:`.hypotheses` - every catalogue entry as a family of candidate terms fitted to them;
 * :mod:`.selection` - cross-validated, significance-tested selection of the families;
 * :mod:`.rollout` - multi-step predictions with and without the findings;
@@ -27,6 +28,7 @@ and for both:
 * :mod:`.explain` - a finding in a naval architect's words;
 * :mod:`.result` - :class:`Diagnosis`, its findings, its JSON and summary;
 * :mod:`.api` - :func:`diagnose`: the checks of its inputs, and which way a record is judged;
+* :mod:`.sizing` - a record's step and length fitted to the method's step and memory budget;
 * :mod:`.report` - the Markdown report with figures (:mod:`.report_format`: what both share);
 * :mod:`.synthetic` - closed-loop recordings of any model with effects added;
 * :mod:`.cases` - the seeded acceptance set and how a diagnosis is scored on it;
