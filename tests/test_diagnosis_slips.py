@@ -79,6 +79,13 @@ def test_time_in_milliseconds_is_refused_before_the_work(usv, monkeypatch, tmp_p
     assert err[-1].startswith("marine diagnose: error: ms.csv: sample step 100 s")
 
 
+def test_seconds_declared_as_milliseconds_are_told(usv, monkeypatch):
+    _forbid_work(monkeypatch)
+    with pytest.raises(ValueError, match=r"1000 samples over 0\.0999 s \(1e\+04 Hz\) is an "
+                                         r"absurd rate .* time in seconds, declared as ms"):
+        diagnose(_with(usv, time=usv.data["time"] / 1000))
+
+
 def test_a_decimation_too_large_is_refused_naming_the_largest(usv, monkeypatch, tmp_path,
                                                               capsys):
     _forbid_work(monkeypatch)

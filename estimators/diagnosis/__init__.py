@@ -14,6 +14,7 @@ seaway, judged by the nominal filter's innovations:
 * :mod:`.feedback` - whether an input effect holds on the input the controller did not choose;
 * :mod:`.actuators` - input effects read off an actuator position sensor, command against position;
 * :mod:`.seaway` - the diagnosis of a record in a seaway: checks, smoothing, search, validation;
+* :mod:`.sizing` - its sample step checked, its rate and length bounded (memory) before the work;
 
 model tests (decays, zigzags, lab runs, series of them), judged in free simulation:
 

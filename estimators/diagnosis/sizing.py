@@ -31,6 +31,8 @@ from scipy import signal
 from marine_envs.models import VehicleModel
 from marine_envs.recording import TIME, Recording
 
+from .seaway import MIN_DURATION
+
 #: The sample step (s) every constant of the seaway method was tuned at: the environments'
 #: own (``env.unwrapped.sim.dt``); a record sampled faster is decimated to it.
 SEAWAY_STEP = {"usv": 0.1, "rov": 0.1, "dp_vessel": 0.5, "hovercraft": 0.1, "hydrofoil": 0.05}
@@ -89,12 +91,19 @@ def coarsest_step(vehicle: VehicleModel, horizon: float) -> float:
 
 
 def step_problem(recording: Recording, vehicle: VehicleModel, horizon: float) -> str:
-    """Why ``recording``'s sample step is too coarse to judge against ``vehicle``, or ``""``;
-    names a likely slip (time in milliseconds, a decimation too large)."""
+    """Why ``recording``'s sample step is too coarse to judge against ``vehicle`` (naming a
+    likely slip: time in milliseconds, a decimation too large), or absurdly fine for a record
+    too short to judge (time in seconds declared as ms), or ``""``."""
     step, coarsest = recording.dt, coarsest_step(vehicle, horizon)
+    name = recording.meta.get("name", "the recording")
+    duration = float(recording.time[-1] - recording.time[0])
+    if step < SEAWAY_STEP.get(vehicle.name, DEFAULT_STEP) / 100 and duration < MIN_DURATION \
+            <= 1000 * duration and 1000 * step <= coarsest:
+        return (f"{name}: {len(recording.time)} samples over {duration:.3g} s "
+                f"({1 / step:.3g} Hz) is an absurd rate for the {vehicle.name} model: is the "
+                "time in seconds, declared as ms? (leave \"time\" out of \"units\")")
     if step <= coarsest:
         return ""
-    name = recording.meta.get("name", "the recording")
     decimate = recording.meta.get("window", {}).get("decimate", 1)
     if decimate > 1 and step / decimate <= coarsest:
         why = (f"keeping every {decimate}-th sample leaves a step of {step:.3g} s: decimate by "
