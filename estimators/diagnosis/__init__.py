@@ -29,7 +29,6 @@ and for both:
 * :mod:`.explain` - a finding in a naval architect's words;
 * :mod:`.result` - :class:`Diagnosis`, its findings, its JSON and summary;
 * :mod:`.api` - :func:`diagnose`: the checks of its inputs, and which way a record is judged;
-* :mod:`.sizing` - a record's step and length fitted to the method's step and memory budget;
 * :mod:`.report` - the Markdown report with figures (:mod:`.report_format`: what both share);
 * :mod:`.synthetic` - closed-loop recordings of any model with effects added;
 * :mod:`.cases` - the seeded acceptance set and how a diagnosis is scored on it;
