@@ -75,8 +75,11 @@ COHERENT = 0.9
 #: record): the USV environment's sea piles up below the 0.64 rad/s its encounter frequency
 #: cannot pass, and 60-s segments made it twice as broad as it is.
 SEA_SEGMENT = 100.0
-#: Bounds of the sea oscillator's damping ratio: a narrow sea at one frequency, a broad one.
-SEA_ZETA = (0.02, 0.7)
+#: Bounds of the sea oscillator's damping ratio: a narrow sea at one frequency; above the
+#: upper one the shared forcing is no narrow-band sea (the USV environment's: 0.05-0.13; the
+#: generator's independent 2-s Gauss-Markov moments, shared at low frequency through the
+#: unmeasured sway: 0.63-0.65), and each equation keeps a forcing of its own.
+SEA_ZETA = (0.02, 0.4)
 
 
 class SmootherDiverged(ValueError):
@@ -412,14 +415,16 @@ def sea_model(model: VehicleModel, error: FloatArray, rows: Sequence[int], dt: f
         high += 1
     band = slice(low, high + 1)
     coherence = float(first[band].sum() / np.trace(S[band].real, axis1=1, axis2=2).sum())
-    if coherence < COHERENT:
+    if coherence < COHERENT or low <= 1:  # not one process, or low-pass: no sea
         return None
     resolution = omega[1] - omega[0]
     a, b, c = np.log(first[peak - 1:peak + 2]) if peak + 1 < len(first) else (0.0, 1.0, 0.0)
     centre = float(omega[peak] + resolution * 0.5 * (a - c) / (a - 2 * b + c))  # parabola
     edges = [_half_power(omega, first, peak, -1), _half_power(omega, first, peak, 1)]
     width = max(edges[1] - edges[0], resolution)
-    zeta = float(np.clip(width / (2 * centre), SEA_ZETA[0], SEA_ZETA[1]))
+    zeta = max(width / (2 * centre), SEA_ZETA[0])
+    if zeta > SEA_ZETA[1]:
+        return None
     sea = Sea(centre, zeta, ())
     # loaded to the shared power in the band, which the oscillator spreads wider than a sea
     fine = np.linspace(omega[low] - resolution / 2, omega[high] + resolution / 2, 200)
