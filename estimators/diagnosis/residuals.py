@@ -15,12 +15,14 @@ filter takes for white biases every fit of a term that the controller correlates
 direct prediction-error method is consistent only with the right noise model). So the last pass
 gives each measured force equation a first-order Gauss-Markov forcing state, its correlation
 time and variance read off the part of the first pass's equation errors that is not a function
-of the state and input (:func:`forcing_model`). Where the model names its environment (a
-hovercraft's wind, a ROV's current: ``VehicleModel.environment_disturbances``) and the measured
-equations determine it, that forcing is the environment itself, estimated as Gauss-Markov
-states, each with a steady part (a mean wind or current, a constant state), that enter through
-the model's own equations: a wind or current acts on the relative velocity, so its effect
-depends on the state, which an additive forcing cannot mimic.
+of the state and input (:func:`forcing_model`). A seaway that drives several equations
+through the model's wave channels as one narrow-band process is one sea (:func:`sea_model`): a
+second-order oscillator added to each at its own amplitude and phase. Where the model names
+its environment (a hovercraft's wind, a ROV's current: ``VehicleModel.environment_disturbances``)
+and the measured equations determine it, that forcing is the environment itself, estimated as
+Gauss-Markov states, each with a steady part (a mean wind or current, a constant state), that
+enter through the model's own equations: a wind or current acts on the relative velocity, so
+its effect depends on the state, which an additive forcing cannot mimic.
 """
 
 from __future__ import annotations
@@ -376,17 +378,20 @@ def sea_model(model: VehicleModel, error: FloatArray, rows: Sequence[int], dt: f
               ) -> Sea | None:
     """The sea as one process (:class:`Sea`) in the ``rows``' equations that the model's
     wave channels (:attr:`~marine_envs.models.VehicleModel.wave_disturbances`) reach, read off
-    the cross-spectra of their equation errors, or None: fewer than two such equations, or
-    errors that are not one process in the sea's band (share below :data:`COHERENT`).
+    the cross-spectra of their equation errors ``error`` ``(T - 1, n)``, or None: fewer than
+    two such equations, errors that are not one process in the sea's band (share below
+    :data:`COHERENT`), or a band that is no narrow one (it reaches zero frequency, or is
+    broader than :data:`SEA_ZETA` allows).
 
     The errors as they are, not the part that is no function of the state: at a resonance the
     sea and the motion it drives are in phase, and a regression on the state would hand the
     sea to the search as damping. What the cross-spectra keep is what the equations share; a
-    missing term in one equation is not in it. The band is where the shared (first
-    eigenvalue's) spectrum stays above half its peak; its centre and width set the
-    oscillator's frequency and damping; each equation's loading is its shared power (over
-    every frequency, the first eigenvalue less the second, the incoherent floor) at the phase
-    of its cross-spectrum with the strongest equation in the band.
+    missing term in one equation is mostly not in it. The band is where the shared (first
+    eigenvalue's) spectrum stays above half its peak; its peak (a parabola through the log
+    spectrum) and half-power width set the oscillator's frequency and damping; each equation's
+    loading is its shared power in the band (the first eigenvalue less the second, the
+    incoherent floor), divided by the oscillator's share of its power there, at the phase of
+    its cross-spectrum with the strongest equation.
     """
     if not model.wave_disturbances:
         return None

@@ -12,6 +12,11 @@ errors, not itself, into the test: the true ``35 v r`` in a ROV's surge made its
 predictions 6 times worse. Each state term is therefore either predicted in the loop or
 evaluated on the smoothed states (what it adds along the record, as the innovations see it),
 whichever predicts the first part of the record, where the findings are fitted, better.
+
+A sea the noise model carries as one narrow-band process (:class:`~.residuals.Sea`) is
+predicted too: its oscillator runs free from its smoothed state at the start. Such a sea is
+predictable for several seconds, and predictions without it were improved by any term that
+keeps the roll ringing (a negative roll damping on an effect-free USV record: 64 % held out).
 """
 
 from __future__ import annotations
