@@ -264,7 +264,7 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
             break
         q = np.where(own, own_q, np.where(measured, variance * dt**2, q * FOLLOW_MODEL))
         if k == passes - 2:
-            forcing, sea = forcing_model(model, x, u, error, measured, dt)
+            forcing, sea = forcing_model(model, x, u, error, measured, dt, sea is not None)
             _check_finite(model, _statistics(forcing, sea))
             forced = sorted({i for f in forcing for i in f.equations}
                             | set(() if sea is None else sea.equations))
@@ -457,12 +457,15 @@ def _half_power(omega: FloatArray, level: FloatArray, peak: int, side: int) -> f
 
 
 def forcing_model(model: VehicleModel, x: FloatArray, u: FloatArray, error: FloatArray,
-                  measured: NDArray[np.bool_], dt: float) -> tuple[list[Forcing], Sea | None]:
+                  measured: NDArray[np.bool_], dt: float, seaway: bool = True
+                  ) -> tuple[list[Forcing], Sea | None]:
     """The coloured forcing of the measured force equations (not the kinematics), fitted to
     what of their equation errors is not a function of the present state and input (a missing
     term is; it must stay a model error, not become forcing), and the sea where the model's
     waves drive several of them (:func:`sea_model`: those equations get no forcing of their
-    own).
+    own) and ``seaway`` says the crude errors held one: a smoother without a sea model mixes a
+    missing roll term into the yaw equation's errors too, where it passed for a sea (the
+    generator's independent moments with a missing roll damping: 0.94 one process).
 
     The model's environment channels come first, where these equations determine them: here
     only a broad prior for :func:`environment_statistics` (least squares through the model's
@@ -474,7 +477,7 @@ def forcing_model(model: VehicleModel, x: FloatArray, u: FloatArray, error: Floa
     exogenous = error - regressors @ np.linalg.lstsq(regressors, error, rcond=None)[0]
     kinematic = displacements(model)
     rows = [int(i) for i in np.flatnonzero(measured) if i not in kinematic]
-    sea = sea_model(model, error, rows, dt)
+    sea = sea_model(model, error, rows, dt) if seaway else None
     if sea is not None:
         rows = [i for i in rows if i not in sea.equations]
     out, explained = _environment_prior(model, x[:-1], u[:-1], exogenous, rows, dt)
