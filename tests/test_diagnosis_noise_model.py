@@ -19,6 +19,7 @@ from estimators.diagnosis.hypotheses import (
 from estimators.diagnosis.residuals import (
     AugmentedDynamics,
     Forcing,
+    Sea,
     denoised,
     estimate,
     model_noise_spread,
@@ -26,6 +27,7 @@ from estimators.diagnosis.residuals import (
 from estimators.diagnosis.synthetic import SEA, synthesize, typical_effect
 from marine_envs.models import get_model
 from marine_envs.models.effects import Effect, ModelWithEffects
+from marine_envs.sea.coupling import USVWaveCoupling
 
 
 def _forcing(residuals, state):
@@ -48,6 +50,37 @@ def test_the_sea_is_modelled_with_its_own_correlation_time():
     # the wave moments are added to the equations: each measured one keeps a forcing of its own
     assert not _environment(residuals)
     assert {model.state_names[f.state] for f in residuals.forcing} == {"r", "p"}
+
+
+@pytest.fixture(scope="module")
+def usv_seaway():
+    """An effect-free 300-s USV-v0 record: its default sea (Hs 2 m, Tp 8 s, 60 deg) and
+    sensors, LQR with the generator's dither."""
+    return simulate("marine_envs/USV-v0", 3000, seed=100, policy="lqr", amplitude=0.15)
+
+
+def test_the_usv_s_sea_is_one_narrow_band_process_in_both_moments(usv_seaway):
+    # the environment's yaw moment is a fixed multiple of its roll moment, peaking beside the
+    # 0.63 rad/s roll mode
+    model = get_model("usv")
+    residuals = estimate(usv_seaway, model)
+    sea = residuals.sea
+    assert sea is not None and not residuals.forcing  # no equation keeps a forcing of its own
+    assert sea.omega == pytest.approx(0.6, abs=0.05) and sea.zeta < 0.2  # narrow band
+    (r, a_r, c_r), (p, a_p, c_p) = sea.loading
+    assert (model.state_names[r], model.state_names[p]) == ("r", "p")
+    # the coupling's ratio (both moments follow the wave slope): 0.32 at 60 deg
+    k = model.params
+    ratio = abs(k.Kdr / k.Tr) * USVWaveCoupling(0.0).yaw_gain * 2 * np.cos(np.radians(60)) \
+        / k.wn**2
+    assert np.hypot(a_r, c_r) / np.hypot(a_p, c_p) == pytest.approx(ratio, rel=0.25)
+
+
+def test_a_narrow_band_sea_at_the_roll_resonance_is_taken_for_no_term(usv_seaway):
+    # with an independent first-order forcing per equation this record got a negative linear
+    # roll damping (108 % of the model's) and a roll-to-yaw coupling, both at confidence 1.00
+    diagnosis = diagnose(usv_seaway, "usv")
+    assert not [f for f in diagnosis.findings if f.confidence >= 0.5], diagnosis.findings
 
 
 def test_a_slow_current_is_the_environment_not_a_finding():
@@ -212,12 +245,30 @@ def test_a_measured_disturbance_is_cleared_of_its_sensor_noise():
     assert np.std(cleared[:, 1] - current) < 0.1 * np.std(current)  # a clean one is kept
 
 
-def _augmented(model):
+def _augmented(model, sea=None):
     """The filter's dynamics with an own forcing on two equations and both wind channels,
-    the first with a steady part."""
+    the first with a steady part (and a ``sea``)."""
     own = [Forcing(0, 2.0, 0.1), Forcing(2, 5.0, 0.2)]
     environment = [Forcing(None, 30.0, 1.0, 0, (0, 1), 4.0), Forcing(None, 20.0, 1.0, 1, (0, 1))]
-    return AugmentedDynamics(model, own, environment)
+    return AugmentedDynamics(model, own, environment, sea)
+
+
+def test_compiled_filter_dynamics_with_a_sea_equal_their_numpy_reference():
+    rng = np.random.default_rng(7)
+    model = get_model("hovercraft")
+    sea = Sea(0.6, 0.1, ((1, 0.1, 0.02), (4, 0.05, -0.01)))
+    f = _augmented(model, sea)
+    assert f._kernel is not None
+    z = rng.normal(size=(9, f.width)) * np.concatenate([np.abs(model.x0) + 1.0,
+                                                        np.ones(f.width - 6)])
+    u = model.u0 + rng.normal(size=(9, len(model.input_names)))
+    got, want = f(z, u, np.zeros((9, 0))), f.reference(z, u)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    waves = z[:, 10:12]  # after the four Gauss-Markov states: the sea drives its equations
+    np.testing.assert_allclose(want[:, 10:12], waves @ sea.dynamics().T)
+    without = _augmented(model).reference(np.delete(z, [10, 11], axis=1), u)
+    np.testing.assert_allclose(want[:, :6] - without[:, :6], waves @ sea.gains(6).T,
+                               atol=1e-12 * np.abs(want).max())
 
 
 @pytest.mark.parametrize("forcing", [True, False])

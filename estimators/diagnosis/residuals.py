@@ -15,12 +15,14 @@ filter takes for white biases every fit of a term that the controller correlates
 direct prediction-error method is consistent only with the right noise model). So the last pass
 gives each measured force equation a first-order Gauss-Markov forcing state, its correlation
 time and variance read off the part of the first pass's equation errors that is not a function
-of the state and input (:func:`forcing_model`). Where the model names its environment (a
-hovercraft's wind, a ROV's current: ``VehicleModel.environment_disturbances``) and the measured
-equations determine it, that forcing is the environment itself, estimated as Gauss-Markov
-states, each with a steady part (a mean wind or current, a constant state), that enter through
-the model's own equations: a wind or current acts on the relative velocity, so its effect
-depends on the state, which an additive forcing cannot mimic.
+of the state and input (:func:`forcing_model`). A seaway that drives several equations
+through the model's wave channels as one narrow-band process is one sea (:func:`sea_model`): a
+second-order oscillator added to each at its own amplitude and phase. Where the model names
+its environment (a hovercraft's wind, a ROV's current: ``VehicleModel.environment_disturbances``)
+and the measured equations determine it, that forcing is the environment itself, estimated as
+Gauss-Markov states, each with a steady part (a mean wind or current, a constant state), that
+enter through the model's own equations: a wind or current acts on the relative velocity, so
+its effect depends on the state, which an additive forcing cannot mimic.
 """
 
 from __future__ import annotations
@@ -68,6 +70,18 @@ STEADY = 5.0
 ENVIRONMENT_PASSES = 2
 #: Finite-difference step of the sensitivity to a disturbance channel, in its units.
 STEP = 1e-3
+#: The equations a model's waves reach take one sea (:func:`sea_model`) when this share of
+#: their normalised error power in the sea's band is one process.
+COHERENT = 0.9
+#: Welch segment of the equations' cross-spectra, s (0.063 rad/s; at most a third of the
+#: record): the USV environment's sea piles up below the 0.64 rad/s its encounter frequency
+#: cannot pass, and 60-s segments made it twice as broad as it is.
+SEA_SEGMENT = 100.0
+#: Bounds of the sea oscillator's damping ratio: a narrow sea at one frequency; above the
+#: upper one the shared forcing is no narrow-band sea (the USV environment's: 0.05-0.13; the
+#: generator's independent 2-s Gauss-Markov moments, shared at low frequency through the
+#: unmeasured sway: 0.63-0.65), and each equation keeps a forcing of its own.
+SEA_ZETA = (0.02, 0.4)
 
 
 class SmootherDiverged(ValueError):
@@ -90,6 +104,8 @@ class Residuals:
     :param forcing: the last pass's coloured forcing of the force equations (noise model).
     :param sensed: the inputs whose actuator position was recorded (``u`` holds the position;
         their input effects are judged on that sensor, :mod:`.actuators`, not searched here).
+    :param sea: the last pass's sea, one process driving the equations its waves reach, or None.
+    :param sea_state: its smoothed states ``(T, 2)`` (predictions carry them on).
     """
 
     model: VehicleModel
@@ -107,6 +123,8 @@ class Residuals:
     innovations: Innovations | None = None
     forcing: tuple[Forcing, ...] = ()
     sensed: tuple[str, ...] = ()
+    sea: Sea | None = None
+    sea_state: FloatArray | None = None
 
     @property
     def midpoint(self) -> FloatArray:
@@ -242,8 +260,10 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
     q = np.where(own, own_q, np.where(measured, q, q * FOLLOW_MODEL))
     x0, P0 = _initial_state(model, y, channels, noise)
     forcing: list[Forcing] = []
+    forces = [int(i) for i in np.flatnonzero(measured) if i not in displacements(model)]
+    sea = sea_model(model, crude_errors(model, y, u, channels, dt), forces, dt)
     for k in range(passes):
-        ekf = _filter(model, dt, channels, q, noise, x0, P0, substeps, forcing)
+        ekf = _filter(model, dt, channels, q, noise, x0, P0, substeps, forcing, sea)
         with np.errstate(over="ignore", invalid="ignore"):  # checked just below
             smoothed = ekf.smooth(u, y, mask)
             x = smoothed.x[:, 0, :n]
@@ -254,25 +274,30 @@ def estimate(recording: Recording, model: VehicleModel, passes: int = 2) -> Resi
             break
         q = np.where(own, own_q, np.where(measured, variance * dt**2, q * FOLLOW_MODEL))
         if k == passes - 2:
-            forcing = forcing_model(model, x, u, error, measured, dt)
-            _check_finite(model, _statistics(forcing))
-            forced = sorted({i for f in forcing for i in f.equations})
+            forcing, sea = forcing_model(model, x, u, error, measured, dt, sea is not None)
+            _check_finite(model, _statistics(forcing, sea))
+            forced = sorted({i for f in forcing for i in f.equations}
+                            | set(() if sea is None else sea.equations))
             q[forced] *= WHITE_SHARE
             for _ in range(ENVIRONMENT_PASSES if _split(forcing)[1] else 0):
                 with np.errstate(over="ignore", invalid="ignore"):
                     forcing = environment_statistics(model, dt, channels, q, noise, x0, P0,
-                                                     substeps, forcing, u, y, mask)
-            _check_finite(model, _statistics(forcing))
+                                                     substeps, forcing, u, y, mask, sea)
+            _check_finite(model, _statistics(forcing, sea))
     return Residuals(model, recording.time, dt, u, y, channels, x, smoothed.std[:, 0, :n],
                      error, noise, observable_states(model, channels), substeps,
                      Innovations.from_filter(ekf, smoothed.filtered, u, n),
-                     _with_levels(forcing, smoothed.x[:, 0, n + len(forcing):]),
-                     recording.actuator_names)
+                     _with_levels(forcing, smoothed.x[:, 0, n + len(forcing) + _width(sea):]),
+                     recording.actuator_names, sea, None if sea is None else
+                     smoothed.x[:, 0, n + len(forcing):n + len(forcing) + _width(sea)])
 
 
-def _statistics(forcing: Sequence[Forcing]) -> FloatArray:
-    """Each forcing's ``(tau, variance)``."""
-    return np.array([(f.tau, f.variance) for f in forcing])
+def _statistics(forcing: Sequence[Forcing], sea: Sea | None = None) -> FloatArray:
+    """Each forcing's ``(tau, variance)``, and the sea's ``(omega, zeta)`` and loadings."""
+    rows = [(f.tau, f.variance) for f in forcing]
+    if sea is not None:
+        rows += [(sea.omega, sea.zeta), *((a, c) for _, a, c in sea.loading)]
+    return np.array(rows)
 
 
 def _check_finite(model: VehicleModel, *arrays: FloatArray) -> None:
@@ -303,11 +328,154 @@ class Forcing:
             object.__setattr__(self, "equations", (self.state,))
 
 
+@dataclass(frozen=True)
+class Sea:
+    """One narrow-band wave process driving several equations: a second-order oscillator
+
+        s1' = omega s2,    s2' = -omega s1 - 2 zeta omega s2 + white
+
+    (``s2 = s1' / omega``: ``s1`` in quadrature; both of unit stationary variance), added to
+    equation ``i`` as ``a s1 + c s2`` for each ``(i, a, c)`` of ``loading`` (state units per
+    s): each equation at its own amplitude and phase, as one wave elevation drives them
+    through the model's wave coupling. A first-order Gauss-Markov forcing cannot represent
+    such a sea: its spectrum is flat below its corner, so at a resonance beside the sea's peak
+    the filter under-tracks it and the search takes the motion it drives for damping.
+
+    :param omega: peak frequency, rad/s.  :param zeta: damping ratio of the oscillator, -.
+    :param loading: ``(equation, a, c)`` per equation the sea reaches.
+    :param coherence: the share of the equations' error power in the sea's band that is one
+        process (the rank-one share of their normalised cross-spectral matrix).
+    """
+
+    omega: float
+    zeta: float
+    loading: tuple[tuple[int, float, float], ...]
+    coherence: float = 1.0
+
+    @property
+    def equations(self) -> tuple[int, ...]:
+        return tuple(i for i, _, _ in self.loading)
+
+    def dynamics(self) -> FloatArray:
+        """``F`` ``(2, 2)`` of ``s' = F s``."""
+        return self.omega * np.array([[0.0, 1.0], [-1.0, -2 * self.zeta]])
+
+    def gains(self, n: int) -> FloatArray:
+        """``G`` ``(n, 2)``: what ``s`` adds to the ``n`` state derivatives."""
+        G = np.zeros((n, 2))
+        for i, a, c in self.loading:
+            G[i] = (a, c)
+        return G
+
+    def spectrum(self, omega: FloatArray) -> FloatArray:
+        """One-sided spectral density of ``s1`` per Hz at ``omega`` (rad/s): unit variance."""
+        w0, z = self.omega, self.zeta
+        return 8 * z * w0**3 / ((w0**2 - omega**2) ** 2 + (2 * z * w0 * omega) ** 2)
+
+    def step_noise(self, dt: float) -> FloatArray:
+        """Per-step process noise ``(2, 2)`` that keeps ``s`` at unit variance:
+        ``I - Phi Phi'`` (the stationary covariance of the scaled oscillator is ``I``)."""
+        Phi = linalg.expm(self.dynamics() * dt)
+        return np.eye(2) - Phi @ Phi.T
+
+
+def _width(sea: Sea | None) -> int:
+    """The filter states the sea takes."""
+    return 0 if sea is None else 2
+
+
+def sea_model(model: VehicleModel, error: FloatArray, rows: Sequence[int], dt: float
+              ) -> Sea | None:
+    """The sea as one process (:class:`Sea`) in the ``rows``' equations that the model's
+    wave channels (:attr:`~marine_envs.models.VehicleModel.wave_disturbances`) reach, read off
+    the cross-spectra of their equation errors ``error`` ``(T - 1, n)``, or None: fewer than
+    two such equations, errors that are not one process in the sea's band (share below
+    :data:`COHERENT`), or a band that is no narrow one (it reaches zero frequency, or is
+    broader than :data:`SEA_ZETA` allows).
+
+    The errors as they are, not the part that is no function of the state: at a resonance the
+    sea and the motion it drives are in phase, and a regression on the state would hand the
+    sea to the search as damping. What the cross-spectra keep is what the equations share; a
+    missing term in one equation is mostly not in it. The band is where the shared (first
+    eigenvalue's) spectrum stays above half its peak; its peak (a parabola through the log
+    spectrum) and half-power width set the oscillator's frequency and damping; each equation's
+    loading is its shared power in the band (the first eigenvalue less the second, the
+    incoherent floor), divided by the oscillator's share of its power there, at the phase of
+    its cross-spectrum with the strongest equation.
+    """
+    if not model.wave_disturbances:
+        return None
+    _, _, E = model.linearize()
+    waves = [model.disturbance_names.index(c) for c in model.wave_disturbances]
+    reached = [i for i in rows if np.any(E[i, waves] != 0)]
+    if len(reached) < 2:
+        return None
+    e = error[:, reached] - error[:, reached].mean(axis=0)
+    scale = np.maximum(e.std(axis=0), 1e-300)
+    z = e / scale
+    m, segment = len(reached), min(len(z) // 3, int(round(SEA_SEGMENT / dt)))
+    S = np.empty((segment // 2 + 1, m, m), dtype=complex)
+    for a in range(m):
+        for b in range(m):
+            f, S[:, a, b] = signal.csd(z[:, a], z[:, b], fs=1 / dt, nperseg=segment)
+    omega, df = 2 * np.pi * f, f[1] - f[0]
+    S = 0.5 * (S + np.conj(S.transpose(0, 2, 1)))  # Hermitian to rounding
+    lam, vec = np.linalg.eigh(S)
+    first, shared = lam[:, -1], np.maximum(lam[:, -1] - lam[:, -2], 0.0)
+    peak = 1 + int(np.argmax(first[1:]))
+    low, high = peak, peak
+    while low > 1 and first[low - 1] >= first[peak] / 2:
+        low -= 1
+    while high < len(first) - 1 and first[high + 1] >= first[peak] / 2:
+        high += 1
+    band = slice(low, high + 1)
+    coherence = float(first[band].sum() / np.trace(S[band].real, axis1=1, axis2=2).sum())
+    if coherence < COHERENT or low <= 1:  # not one process, or low-pass: no sea
+        return None
+    resolution = omega[1] - omega[0]
+    a, b, c = np.log(first[peak - 1:peak + 2]) if peak + 1 < len(first) else (0.0, 1.0, 0.0)
+    centre = float(omega[peak] + resolution * 0.5 * (a - c) / (a - 2 * b + c))  # parabola
+    edges = [_half_power(omega, first, peak, -1), _half_power(omega, first, peak, 1)]
+    width = max(edges[1] - edges[0], resolution)
+    zeta = max(width / (2 * centre), SEA_ZETA[0])
+    if zeta > SEA_ZETA[1]:
+        return None
+    sea = Sea(centre, zeta, ())
+    # loaded to the shared power in the band, which the oscillator spreads wider than a sea
+    fine = np.linspace(omega[low] - resolution / 2, omega[high] + resolution / 2, 200)
+    share = float(np.mean(sea.spectrum(fine))) * (fine[-1] - fine[0]) / (2 * np.pi)
+    power = np.sum(shared[band, None] * np.abs(vec[band, :, -1]) ** 2, axis=0) * df \
+        * scale**2 / share
+    reference = int(np.argmax(power))
+    phase = np.angle(S[band, reference, :].sum(axis=0))  # of each equation against it
+    amplitude = np.sqrt(power)
+    loading = tuple((i, float(amp * np.cos(ph)), float(amp * np.sin(ph)))
+                    for i, amp, ph in zip(reached, amplitude, phase, strict=True))
+    return replace(sea, loading=loading, coherence=coherence)
+
+
+def _half_power(omega: FloatArray, level: FloatArray, peak: int, side: int) -> float:
+    """The frequency on ``side`` (-1 below, +1 above) of ``peak`` where ``level`` first falls
+    to half its peak, interpolated between bins (the last bin's frequency if it never does)."""
+    k = peak
+    while 0 < k + side < len(level) and level[k + side] >= level[peak] / 2:
+        k += side
+    if not 0 < k + side < len(level):
+        return float(omega[k])
+    a, b = level[k], level[k + side]
+    return float(omega[k] + side * (omega[1] - omega[0]) * (a - level[peak] / 2) / (a - b))
+
+
 def forcing_model(model: VehicleModel, x: FloatArray, u: FloatArray, error: FloatArray,
-                  measured: NDArray[np.bool_], dt: float) -> list[Forcing]:
+                  measured: NDArray[np.bool_], dt: float, seaway: bool = True
+                  ) -> tuple[list[Forcing], Sea | None]:
     """The coloured forcing of the measured force equations (not the kinematics), fitted to
     what of their equation errors is not a function of the present state and input (a missing
-    term is; it must stay a model error, not become forcing).
+    term is; it must stay a model error, not become forcing), and the sea where the model's
+    waves drive several of them (:func:`sea_model`: those equations get no forcing of their
+    own) and ``seaway`` says the crude errors held one: a smoother without a sea model mixes a
+    missing roll term into the yaw equation's errors too, where it passed for a sea (the
+    generator's independent moments with a missing roll damping: 0.94 one process).
 
     The model's environment channels come first, where these equations determine them: here
     only a broad prior for :func:`environment_statistics` (least squares through the model's
@@ -319,6 +487,9 @@ def forcing_model(model: VehicleModel, x: FloatArray, u: FloatArray, error: Floa
     exogenous = error - regressors @ np.linalg.lstsq(regressors, error, rcond=None)[0]
     kinematic = displacements(model)
     rows = [int(i) for i in np.flatnonzero(measured) if i not in kinematic]
+    sea = sea_model(model, error, rows, dt) if seaway else None
+    if sea is not None:
+        rows = [i for i in rows if i not in sea.equations]
     out, explained = _environment_prior(model, x[:-1], u[:-1], exogenous, rows, dt)
     exogenous[:, rows] -= explained
     for i in rows:
@@ -331,7 +502,7 @@ def forcing_model(model: VehicleModel, x: FloatArray, u: FloatArray, error: Floa
         below = np.flatnonzero(level[peak:] < level[peak] / 2)
         corner = omega[peak + below[0]] if below.size else omega[-1]
         out.append(Forcing(i, float(1 / corner), float((1 - WHITE_SHARE) * np.var(e))))
-    return out
+    return out, sea
 
 
 def _environment_prior(model: VehicleModel, x: FloatArray, u: FloatArray,
@@ -369,17 +540,18 @@ def _environment_prior(model: VehicleModel, x: FloatArray, u: FloatArray,
 def environment_statistics(model: VehicleModel, dt: float, channels: tuple[str, ...],
                            q: FloatArray, noise: FloatArray, x0: FloatArray, P0: FloatArray,
                            substeps: int, forcing: list[Forcing], u: FloatArray, y: FloatArray,
-                           mask: NDArray[np.bool_] | None = None) -> list[Forcing]:
+                           mask: NDArray[np.bool_] | None = None, sea: Sea | None = None
+                           ) -> list[Forcing]:
     """The environment channels' Gauss-Markov statistics from the filter itself: smoothed as
     states under their present statistics, then each series' decorrelation time and variance,
     the latter at most the present one (the first is the broad prior of
     :func:`forcing_model`: a smoother free to move the environment would take a missing term
     for it). The equation errors alone cannot show a slow current or wind: under control the
     thrust that holds against it is a function of the input, which their fit removes.
-    ``mask``: the valid measurements ``(T, m)`` (None: all)."""
+    ``mask``: the valid measurements ``(T, m)`` (None: all); ``sea``: the sea, if any."""
     own, environment = _split(forcing)
     start = len(model.state_names) + len(own)
-    z = _filter(model, dt, channels, q, noise, x0, P0, substeps, own + environment
+    z = _filter(model, dt, channels, q, noise, x0, P0, substeps, own + environment, sea
                 ).smooth(u, y, mask).x[:, 0, start:start + len(environment)]
     return own + [replace(f, tau=_decorrelation_time(e, dt, f.tau),
                           variance=min(float(np.var(e)), f.variance))
@@ -420,11 +592,11 @@ def _state_functions(x: FloatArray, u: FloatArray) -> FloatArray:
 
 def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatArray,
             noise: FloatArray, x0: FloatArray, P0: FloatArray, substeps: int,
-            forcing: Sequence[Forcing]) -> ExtendedKalmanFilter:
+            forcing: Sequence[Forcing], sea: Sea | None = None) -> ExtendedKalmanFilter:
     """The nominal model's filter with per-step process noise ``q`` on the states and, after
     them, the ``forcing`` states (zero mean, their stationary variance as prior): the
-    equations' own forcings, the environment's channels, then the steady parts of those that
-    have one (constants)."""
+    equations' own forcings, the environment's channels, the ``sea``'s two states, then the
+    steady parts of those that have one (constants)."""
     n = len(model.state_names)
     own, environment = _split(forcing)
     forcing = own + environment
@@ -432,19 +604,22 @@ def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatA
     tau = np.array([f.tau for f in forcing])
     variance = np.array([f.variance for f in forcing])
     outputs = [model.output_names.index(c) for c in channels]
-    if not forcing and model.output_names == model.state_names:
+    if not forcing and sea is None and model.output_names == model.state_names:
         h: Any = np.eye(n)[outputs]  # a matrix, as ExtendedKalmanFilter.from_model's
     else:
         def h(z: FloatArray) -> FloatArray:
             return model.output(z[:, :n])[:, outputs]
 
     decay = np.exp(-2 * dt / tau)
-    Q = np.diag(np.concatenate([q, variance * (1 - decay), np.zeros(len(steady))]))
-    dynamics = AugmentedDynamics(model, own, environment)
+    waves = np.zeros((0, 0)) if sea is None else sea.step_noise(dt)
+    Q = linalg.block_diag(np.diag(np.concatenate([q, variance * (1 - decay)])), waves,
+                          np.zeros((len(steady), len(steady))))
+    dynamics = AugmentedDynamics(model, own, environment, sea)
     names = ([f"forcing_{model.state_names[i]}" for i in dynamics.rows]
              + [model.disturbance_names[c] for c in dynamics.channels]
+             + ["sea", "sea_quadrature"][:_width(sea)]
              + [f"steady_{model.disturbance_names[c]}" for c in dynamics.steady])
-    prior = np.concatenate([variance, [f.steady for f in steady]])
+    prior = np.concatenate([variance, np.ones(_width(sea)), [f.steady for f in steady]])
     return ExtendedKalmanFilter(
         dynamics, h, dt=dt, Q=Q, R=np.diag(noise**2), n_inputs=len(model.input_names),
         state_names=(*model.state_names, *names),
@@ -456,7 +631,8 @@ class AugmentedDynamics:
     """The filter's dynamics ``f(z, u, theta) -> z_dot`` (rows of ``z``: the model's states,
     then its forcing states, :func:`_filter`): the model's equations with the equations' own
     forcings added and the environment's channels (plus their steady parts) as its
-    disturbances; each forcing a first-order Gauss-Markov process, a steady part constant.
+    disturbances; each forcing a first-order Gauss-Markov process, a steady part constant;
+    the sea's two states (:class:`Sea`) an oscillator added to the equations it reaches.
 
     Compiled (:func:`augmented_rows`) for a model with compiled equations (the filter calls it
     at every RK4 stage and for every Jacobian, on a few rows, where a numpy call costs mostly
@@ -464,17 +640,20 @@ class AugmentedDynamics:
 
     :param own: the equations' own forcings (``Forcing.state`` set), in the filter's order.
     :param environment: the environment's channels (``Forcing.disturbance`` set).
+    :param sea: the sea, or None.
     """
 
     def __init__(self, model: VehicleModel, own: Sequence[Forcing],
-                 environment: Sequence[Forcing]) -> None:
+                 environment: Sequence[Forcing], sea: Sea | None = None) -> None:
         self.model, self.n, self.n_d = model, len(model.state_names), len(model.disturbance_names)
         self.rows = np.array([f.state for f in own], dtype=np.int64)
         self.channels = np.array([f.disturbance for f in environment], dtype=np.int64)
         self.steady = np.array([f.disturbance for f in environment if f.steady > 0],
                                dtype=np.int64)
         self.tau = np.array([f.tau for f in (*own, *environment)], dtype=np.float64)
-        self.width = self.n + self.tau.size + self.steady.size
+        self.sea_F = np.zeros((0, 0)) if sea is None else sea.dynamics()
+        self.sea_G = np.zeros((self.n, 0)) if sea is None else sea.gains(self.n)
+        self.width = self.n + self.tau.size + _width(sea) + self.steady.size
         compiled = type(model).equations is not None and type(model).rhs is VehicleModel.rhs \
             and model.constants.ndim == 1
         self._kernel = augmented_rows(type(model).equations.core) if compiled else None
@@ -487,30 +666,36 @@ class AugmentedDynamics:
             return self.reference(z, u)
         out = np.empty((z.shape[0], self.width))
         self._kernel(c_array(z), c_array(u), self._p, self.rows, self.channels, self.steady,
-                     self.tau, self.n, self.n_d, out)
+                     self.tau, self.sea_F, self.sea_G, self.n, self.n_d, out)
         return out
 
     def reference(self, z: FloatArray, u: FloatArray) -> FloatArray:
         """:meth:`__call__` in numpy, through ``model.rhs``."""
-        n, n_own, n_f = self.n, self.rows.size, self.n + self.tau.size
+        n, n_own, n_gm = self.n, self.rows.size, self.n + self.tau.size
+        n_f = n_gm + self.sea_F.shape[0]
         d = np.zeros((len(z), self.n_d))
-        d[:, self.channels] = z[:, n + n_own:n_f]
+        d[:, self.channels] = z[:, n + n_own:n_gm]
         d[:, self.steady] += z[:, n_f:]
         x_dot = self.model.rhs(z[:, :n], u, d)
         x_dot[:, self.rows] += z[:, n:n + n_own]
-        return np.concatenate([x_dot, -z[:, n:n_f] / self.tau,
-                               np.zeros((len(z), self.steady.size))], axis=1)
+        sea = z[:, n_gm:n_f]
+        return np.concatenate([x_dot + sea @ self.sea_G.T, -z[:, n:n_gm] / self.tau,
+                               sea @ self.sea_F.T, np.zeros((len(z), self.steady.size))],
+                              axis=1)
 
 
 @functools.cache
 def augmented_rows(core: Callable[..., None]) -> Callable[..., None]:
     """The compiled :class:`AugmentedDynamics` of a model's equations ``core(x, u, d, p,
-    out)`` (:mod:`marine_envs.compiled`): ``f(Z, U, p, rows, channels, steady, tau, n, n_d,
-    OUT)`` on every row of ``Z``; made once per process, compiled once per machine."""
+    out)`` (:mod:`marine_envs.compiled`): ``f(Z, U, p, rows, channels, steady, tau, sea_F,
+    sea_G, n, n_d, OUT)`` on every row of ``Z``; made once per process, compiled once per
+    machine."""
 
     @jit
-    def augmented(Z, U, p, rows, channels, steady, tau, n, n_d, OUT):
-        n_own, n_f = rows.size, n + tau.size
+    def augmented(Z, U, p, rows, channels, steady, tau, sea_F, sea_G, n, n_d, OUT):
+        n_own, n_gm = rows.size, n + tau.size
+        n_sea = sea_F.shape[0]
+        n_f = n_gm + n_sea
         d = np.empty(n_d)
         for b in range(Z.shape[0]):
             z, out = Z[b], OUT[b]
@@ -522,7 +707,14 @@ def augmented_rows(core: Callable[..., None]) -> Callable[..., None]:
             core(z[:n], U[b], d, p, out[:n])
             for j in range(n_own):
                 out[rows[j]] += z[n + j]
-            for j in range(n, n_f):
+            for i in range(n_sea):
+                for j in range(n):
+                    out[j] += sea_G[j, i] * z[n_gm + i]
+                total = 0.0
+                for j in range(n_sea):
+                    total += sea_F[i, j] * z[n_gm + j]
+                out[n_gm + i] = total
+            for j in range(n, n_gm):
                 out[j] = -z[j] / tau[j - n]
             for j in range(n_f, out.size):
                 out[j] = 0.0
@@ -583,14 +775,33 @@ def model_noise_spread(model: VehicleModel, channels: tuple[str, ...], dt: float
 def _initial_process_noise(model: VehicleModel, y: FloatArray, u: FloatArray,
                            channels: tuple[str, ...], dt: float) -> FloatArray:
     """A first guess of the per-step process noise variance of each state: a tenth of the
-    spread of its derivative along a crude trajectory (measured states from the smoothed data,
-    the others at their nominal values)."""
+    spread of its derivative along a crude trajectory (:func:`_crude`)."""
+    rates = np.std(model.rhs(_crude(model, y, channels, dt), u), axis=0)
+    floor = 1e-6 * (np.abs(model.x0) + 1.0)
+    return (np.maximum(0.1 * rates, floor) * dt) ** 2
+
+
+def _crude(model: VehicleModel, y: FloatArray, channels: tuple[str, ...], dt: float,
+           deriv: int = 0) -> FloatArray:
+    """A crude trajectory ``(T, n)`` (``deriv=1``: its rates): the measured states from the
+    data smoothed over 2 s (Savitzky-Golay, cubic), the others at their nominal values (rate
+    0)."""
     window = min(len(y) // 2 * 2 - 1, 2 * int(1.0 / dt) + 1)
-    smooth = signal.savgol_filter(y, max(window, 5), 3, axis=0) if len(y) > 5 else y
-    crude = np.tile(model.x0, (len(y), 1))
+    smooth = signal.savgol_filter(y, max(window, 5), 3, deriv, delta=dt, axis=0) \
+        if len(y) > 5 else (y if deriv == 0 else np.gradient(y, dt, axis=0))
+    crude = np.tile(model.x0 * (deriv == 0), (len(y), 1))
     for j, name in enumerate(channels):
         if name in model.state_names:
             crude[:, model.state_names.index(name)] = smooth[:, j]
-    rates = np.std(model.rhs(crude, u), axis=0)
-    floor = 1e-6 * (np.abs(model.x0) + 1.0)
-    return (np.maximum(0.1 * rates, floor) * dt) ** 2
+    return crude
+
+
+def crude_errors(model: VehicleModel, y: FloatArray, u: FloatArray,
+                 channels: tuple[str, ...], dt: float) -> FloatArray:
+    """Equation errors ``(T, n)`` along the crude trajectory (:func:`_crude`): the data's
+    rates less the model's (meaningful in the measured states' equations). Before any
+    smoothing they hold the sea at its full strength: a first smoother, its process noise
+    guessed, keeps to the model and leaves most of it in the measurement residuals (the USV
+    environment's yaw moment came out at a 60th of its variance)."""
+    crude = _crude(model, y, channels, dt)
+    return _crude(model, y, channels, dt, deriv=1) - model.rhs(crude, u)

@@ -14,7 +14,7 @@ import numpy as np
 from marine_envs.files import write_text
 from marine_envs.models.effects import Effect
 
-from .residuals import Forcing, Residuals
+from .residuals import Forcing, Residuals, Sea
 from .rollout import Rollouts
 from .selection import Selection
 
@@ -88,7 +88,7 @@ class Diagnosis:
         ``unconfirmed`` findings, the ``calibration`` and the ``noise_model`` (the coloured
         forcing: each environment channel the filter estimated, its steady part and std in
         its units, and each force equation's own, std in state units per s; correlation
-        times, s)."""
+        times, s; and the sea driving several equations as one process)."""
         out = {"model": self.model, "mismatch": self.mismatch, "channels": self.channels,
                "windows": self.windows, "band": self.band,
                "findings": [_finding_dict(f) for f in self.findings], "fit": self.fit}
@@ -107,9 +107,10 @@ class Diagnosis:
         for key in ("warnings", "missing_samples", "record"):
             if getattr(self, key):
                 out[key] = getattr(self, key)
-        if self.residuals is not None and self.residuals.forcing:
-            out["noise_model"] = [_forcing_dict(f, self.residuals.model)
-                                  for f in self.residuals.forcing]
+        res = self.residuals
+        if res is not None and (res.forcing or res.sea is not None):
+            out["noise_model"] = [_forcing_dict(f, res.model) for f in res.forcing] + (
+                [] if res.sea is None else [_sea_dict(res.sea, res.model)])
         return json.loads(json.dumps(out, default=_plain))
 
     def to_json(self, path: str | Path | None = None) -> str:
@@ -191,6 +192,15 @@ def _forcing_dict(f: Forcing, model: Any) -> dict[str, Any]:
             "unit": model.disturbance_units[f.disturbance], "steady": f.level,
             "correlation_time": tau, "std": std,
             "equations": [model.state_names[i] for i in f.equations]}
+
+
+def _sea_dict(sea: Sea, model: Any) -> dict[str, Any]:
+    """The sea of the noise model: its peak frequency (rad/s), damping ratio, and per equation
+    its std (state units per s) and phase (deg, against the strongest)."""
+    return {"sea": {"omega": sea.omega, "zeta": sea.zeta, "coherence": sea.coherence,
+                    "equations": {model.state_names[i]: {"std": math.hypot(a, c),
+                                                         "phase": math.degrees(math.atan2(c, a))}
+                                  for i, a, c in sea.loading}}}
 
 
 def _finding_dict(f: Finding) -> dict[str, Any]:

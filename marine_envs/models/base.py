@@ -65,6 +65,10 @@ class VehicleModel(ABC):
     #: motion), driven by unit-intensity white disturbances: the model states their statistics,
     #: so a diagnosis takes their process noise from the model and looks for no term in them.
     noise_model_states: ClassVar[tuple[str, ...]] = ()
+    #: The disturbance channels one wave elevation drives, each through the model's own wave
+    #: coupling (:mod:`marine_envs.sea.coupling`, a response per metre of wave amplitude): in a
+    #: seaway they are one process, not independent ones, and a diagnosis models them so.
+    wave_disturbances: ClassVar[tuple[str, ...]] = ()
     #: The gain and time constant ``(K, T)`` of a first-order lag ``T x' + x = K u`` in the
     #: model: fits move them as ``K/T`` and ``1/T``, which stay finite where the lag turns
     #: unstable (``1/T`` through 0, ``T`` through infinity).
@@ -387,6 +391,11 @@ class MeasuredDisturbances(VehicleModel):
     @property
     def environment_disturbances(self) -> tuple[str, ...]:
         return tuple(n for n in self.model.environment_disturbances
+                     if n not in self.measured_disturbances)
+
+    @property
+    def wave_disturbances(self) -> tuple[str, ...]:  # type: ignore[override]
+        return tuple(n for n in self.model.wave_disturbances
                      if n not in self.measured_disturbances)
 
     @property

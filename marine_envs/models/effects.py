@@ -322,7 +322,7 @@ class ModelWithEffects(VehicleModel):
         super().__init__(model.params)
         self.nominal, self.effects = model, tuple(effects)
         for attr in ("name", "state_names", "input_names", "disturbance_names", "state_units",
-                     "input_units", "disturbance_units"):
+                     "input_units", "disturbance_units", "wave_disturbances"):
             setattr(self, attr, getattr(model, attr))
         self._rows = [model.state_names.index(e.target) for e in self.effects]
 
