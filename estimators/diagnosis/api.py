@@ -129,15 +129,16 @@ def _diagnose(recordings: list[Recording], vehicle: VehicleModel | None,
         if rec.model != vehicle.name:
             return Diagnosis(vehicle.name, None, other_model(rec, vehicle))
     vehicle = _with_measured_disturbances(vehicle, recordings)
+    # an actuator position sensor shows its actuator's effects directly; the hull is judged on
+    # the position they give the command (residuals.model_inputs)
+    found, recordings = actuators.judge(recordings, vehicle, config)
     if method == "free" or (method == "auto" and _model_test(recordings)):
         diagnosis = diagnose_series(recordings, vehicle, calibrate, log=log, stage=stage)
     else:
         diagnosis = diagnose_seaway(recordings, vehicle, calibrate, config, log, stage)
     if isinstance(vehicle, MeasuredDisturbances):
         diagnosis.measured_disturbances = vehicle.measured_disturbances
-    # an actuator position sensor shows its actuator's effects directly (the hull is judged
-    # on the position: residuals.model_inputs)
-    return actuators.merged(diagnosis, actuators.judge(recordings, vehicle, config))
+    return actuators.merged(diagnosis, found)
 
 
 def _named(recording: Recording, path: str | Path) -> Recording:
