@@ -71,7 +71,10 @@ def test_no_actuator_effect_where_the_position_follows_the_command():
     rec = simulate(USV, 1500, seed=5, policy="lqr", amplitude=0.15, actuator_sensors=True,
                    actuator_noise=0.003)
     assert np.std(rec.applied("delta") - rec.data["delta"]) == pytest.approx(0.003, rel=0.1)
-    assert actuators.judge([rec], get_model("usv"), DiagnosisConfig()) == []
+    found, (hull,) = actuators.judge([rec], get_model("usv"), DiagnosisConfig())
+    assert found == []
+    # the hull's input is then the command, free of the sensor's noise
+    np.testing.assert_array_equal(hull.applied("delta"), rec.data["delta"])
 
 
 def test_info_holds_the_command_and_the_applied_input():

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -73,18 +74,38 @@ class Chosen:
     improvements: list[float]
 
 
-def judge(recordings: Sequence[Recording], model: VehicleModel,
-          config: DiagnosisConfig) -> list[Finding]:
+def judge(recordings: Sequence[Recording], model: VehicleModel, config: DiagnosisConfig
+          ) -> tuple[list[Finding], list[Recording]]:
     """The input effects the actuator position sensors of ``recordings`` show, as findings
-    (empty when the records hold none, or the positions follow the commands)."""
+    (none when the records hold no such sensor, or the positions follow the commands), and
+    the recordings with each sensor's column replaced by the position those effects give the
+    command (the command itself where there are none): the hull's input, without the
+    sensor's noise. A Wiener filter cannot clear that noise from an autopilot's broadband
+    command without cutting some of the command too; on the held-out effect-free USV records
+    of benchmarks/env_recordings.py the hull then took the difference for roll damping and
+    couplings, which it did not on the command."""
     names = [n for n in model.input_names if all(n in r.actuator_names for r in recordings)]
     findings: list[Finding] = []
+    positions = [r.data.copy() for r in recordings]
     for name in names:
         j = list(model.input_names).index(name)
         segments = [_segment(r, model, j, config.fit_fraction) for r in recordings]
         chosen = choose(segments, model, j, recordings[0].dt, config.alpha)
-        findings += _findings(chosen, segments, model, j, recordings[0].dt)
-    return findings
+        effects, found = _findings(chosen, segments, model, j, recordings[0].dt)
+        findings += found
+        for data, segment in zip(positions, segments, strict=True):
+            data[name + APPLIED] = through(effects, segment, model, j, recordings[0].dt)
+    return findings, [_like(r, data) for r, data in zip(recordings, positions, strict=True)]
+
+
+def _like(recording: Recording, data: Any) -> Recording:
+    """``recording`` with the table ``data`` (its missing samples and warnings kept)."""
+    if not recording.actuator_names:
+        return recording
+    out = Recording(data, recording.model, recording.params, recording.meta,
+                    require_uniform=False)
+    out.gaps, out.warnings = recording.gaps, list(recording.warnings)
+    return out
 
 
 def _segment(recording: Recording, model: VehicleModel, j: int, fit_fraction: float) -> Segment:
@@ -188,9 +209,9 @@ def _improvement(before: FloatArray, after: FloatArray, noise: float) -> float:
 
 
 def _findings(chosen: Chosen, segments: Sequence[Segment], model: VehicleModel, j: int,
-              dt: float) -> list[Finding]:
-    """The chosen effects refitted on the whole record (each with the others held), with a
-    block jackknife's standard deviation."""
+              dt: float) -> tuple[list[Effect], list[Finding]]:
+    """The chosen effects refitted on the whole record (each with the others held), and
+    as findings, with a block jackknife's standard deviation."""
     whole = [Segment(s.commanded, s.position, np.ones(len(s.position), bool)) for s in segments]
     effects = list(chosen.effects)
     for k, effect in enumerate(effects):
@@ -209,7 +230,7 @@ def _findings(chosen: Chosen, segments: Sequence[Segment], model: VehicleModel, 
             f"{effect.parameters[key]:.4g} {_unit(effect, model, j)}): it removes "
             f"{chosen.improvements[k]:.0%} of the held-out difference between them beyond "
             "the sensor's noise; judged on the sensor, not through the hull"))
-    return out
+    return effects, out
 
 
 def _jackknife(effects: list[Effect], k: int, segments: Sequence[Segment], model: VehicleModel,

@@ -146,6 +146,9 @@ def _diagnose(recordings: list[Recording], vehicle: VehicleModel | None,
     if slips:
         raise ValueError("; ".join(slips))
     vehicle = _with_measured_disturbances(vehicle, recordings)
+    # an actuator position sensor shows its actuator's effects directly; the hull is judged on
+    # the position they give the command (residuals.model_inputs)
+    found, recordings = actuators.judge(recordings, vehicle, config)
     if method == "free" or (method == "auto" and _model_test(recordings)):
         diagnosis = diagnose_series(recordings, vehicle, calibrate, log=log, stage=stage)
     elif len(recordings) > 1:
@@ -156,9 +159,7 @@ def _diagnose(recordings: list[Recording], vehicle: VehicleModel | None,
         diagnosis.record = resized
     if isinstance(vehicle, MeasuredDisturbances):
         diagnosis.measured_disturbances = vehicle.measured_disturbances
-    # an actuator position sensor shows its actuator's effects directly (the hull is judged
-    # on the position: residuals.model_inputs)
-    return actuators.merged(diagnosis, actuators.judge(recordings, vehicle, config))
+    return actuators.merged(diagnosis, found)
 
 
 def _refuse_duplicates(recordings: Sequence[Recording]) -> None:
