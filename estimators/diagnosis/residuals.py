@@ -540,9 +540,11 @@ def compiled_augmented(dynamics: AugmentedDynamics) -> CompiledDynamics | None:
     (:class:`~marine_envs.models.MeasuredDisturbances`, a ROV's logged morph command) takes
     them from the inputs after its actuators'.
 
-    ``q``: the model's packed constants, the forcings' correlation times, then (as floats) the
-    equations of the own forcings and the model's disturbance channels of the environment, of
-    their steady parts and of the measured disturbances."""
+    ``q``: the numbers of own forcings, environment channels, steady parts and measured
+    disturbances, the model's packed constants, the forcings' correlation times, then (as
+    floats) the equations of the own forcings and the model's disturbance channels of the
+    environment, of their steady parts and of the measured disturbances: read as the kernel
+    runs, so that one kernel per vehicle serves every forcing model (compiled once)."""
     model = dynamics.model
     base = model.model if isinstance(model, MeasuredDisturbances) else model
     if type(base).equations is None or type(base).rhs is not VehicleModel.rhs \
@@ -552,11 +554,11 @@ def compiled_augmented(dynamics: AugmentedDynamics) -> CompiledDynamics | None:
     rest = np.array([names.index(c) for c in model.disturbance_names], dtype=np.int64)
     measured = [names.index(c) for c in getattr(model, "measured_disturbances", ())]
     constants = np.asarray(base.constants, dtype=float)
-    q = np.concatenate([constants, dynamics.tau, dynamics.rows, rest[dynamics.channels],
-                        rest[dynamics.steady], measured]).astype(float)
+    counts = [dynamics.rows.size, dynamics.channels.size, dynamics.steady.size, len(measured)]
+    q = np.concatenate([counts, constants, dynamics.tau, dynamics.rows,
+                        rest[dynamics.channels], rest[dynamics.steady], measured]).astype(float)
     f = augmented_core(type(base).equations.core, dynamics.n, constants.size,
-                       dynamics.rows.size, dynamics.channels.size, dynamics.steady.size,
-                       len(base.input_names), len(measured), len(names))
+                       len(base.input_names), len(names))
     made = CompiledDynamics(f, compiled.rk4(f), same_constants, no_parameters, q,
                             (np.zeros(0), np.zeros(0, dtype=np.int64)), dynamics.width, 0)
     return made if _reproduces(made, dynamics) else None
@@ -578,22 +580,23 @@ def _reproduces(made: CompiledDynamics, dynamics: AugmentedDynamics) -> bool:
 
 
 @functools.cache
-def augmented_core(core: Callable[..., None], n: int, n_p: int, n_own: int, n_env: int,
-                   n_steady: int, n_act: int, n_measured: int, n_d: int) -> Callable[..., None]:
+def augmented_core(core: Callable[..., None], n: int, n_p: int, n_act: int,
+                   n_d: int) -> Callable[..., None]:
     """One boat's :class:`AugmentedDynamics` ``f(z, u, d, q, out)`` (``d`` unused: the
     environment is in ``z``) of a model's equations ``core(x, u, d, p, out)`` with ``n``
-    states, ``n_p`` constants, ``n_act`` actuator inputs (then ``n_measured`` measured
-    disturbances) and ``n_d`` disturbance channels; ``q`` as :func:`compiled_augmented` packs
-    it. Made once per process, compiled once per machine."""
-    n_f = n + n_own + n_env
-    at_rows = n_p + n_own + n_env
-    at_channels = at_rows + n_own
-    at_steady = at_channels + n_env
-    at_measured = at_steady + n_steady
+    states, ``n_p`` constants, ``n_act`` actuator inputs (then any measured disturbances) and
+    ``n_d`` disturbance channels; ``q`` as :func:`compiled_augmented` packs it. Made once per
+    process, compiled once per machine."""
     width = max(n_d, 1)  # (a literal size for the scratch on the stack)
 
     @jit
     def augmented(z, u, d, q, out):
+        n_own, n_env, n_steady, n_measured = int(q[0]), int(q[1]), int(q[2]), int(q[3])
+        n_f = n + n_own + n_env
+        at_rows = 4 + n_p + n_own + n_env
+        at_channels = at_rows + n_own
+        at_steady = at_channels + n_env
+        at_measured = at_steady + n_steady
         full = local_array(width)
         for j in range(n_d):
             full[j] = 0.0
@@ -603,11 +606,11 @@ def augmented_core(core: Callable[..., None], n: int, n_p: int, n_own: int, n_en
             full[int(q[at_steady + j])] += z[n_f + j]
         for j in range(n_measured):
             full[int(q[at_measured + j])] = u[n_act + j]
-        core(z[:n], u[:n_act], full[:n_d], q[:n_p], out[:n])
+        core(z[:n], u[:n_act], full[:n_d], q[4:4 + n_p], out[:n])
         for j in range(n_own):
             out[int(q[at_rows + j])] += z[n + j]
         for j in range(n, n_f):
-            out[j] = -z[j] / q[n_p + j - n]
+            out[j] = -z[j] / q[4 + n_p + j - n]
         for j in range(n_f, out.size):
             out[j] = 0.0
 
