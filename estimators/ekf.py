@@ -33,7 +33,7 @@ from marine_envs.models import VehicleModel
 from marine_envs.models.integrate import rk4
 
 from .base import Estimator, as_batch, check_covariance, check_measurement
-from .ekf_compiled import CompiledFilter, compiled_dynamics
+from .ekf_compiled import CompiledDynamics, CompiledFilter, compiled_dynamics, rts_loop
 from .kalman import _wrap, _wrapped_channels, default_measurement_noise, default_process_noise
 
 FloatArray = NDArray[np.float64]
@@ -117,6 +117,9 @@ class ExtendedKalmanFilter(Estimator):
     :param substeps: RK4 steps per prediction.
     :param batch_size: number of filters ``N``.
     :param divergence_ratio, reinitialise_diverged: as :class:`~estimators.kalman.KalmanFilter`.
+    :param compiled: ``f`` as compiled dynamics without parameters (its ``f(z, u, d, q, out)``
+        reading no disturbance ``d``): predict and update then run compiled
+        (:mod:`estimators.ekf_compiled`) when ``h`` is a matrix selecting states.
     """
 
     def __init__(self, f: Dynamics, h: ArrayLike | Callable[[FloatArray], FloatArray], *,
@@ -127,7 +130,8 @@ class ExtendedKalmanFilter(Estimator):
                  parameter_jacobian: Dynamics | None = None, x0: ArrayLike | None = None,
                  P0: ArrayLike | None = None, angular: Sequence[str | int] = (),
                  substeps: int = 1, batch_size: int = 1, divergence_ratio: float = 10.0,
-                 reinitialise_diverged: bool = False) -> None:
+                 reinitialise_diverged: bool = False,
+                 compiled: CompiledDynamics | None = None) -> None:
         n, p, m = len(state_names), len(parameter_names), len(measurement_names)
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt={dt!r} is invalid: must be > 0 s")
@@ -168,6 +172,12 @@ class ExtendedKalmanFilter(Estimator):
         self.divergence_ratio = float(divergence_ratio)
         self.reinitialise_diverged = reinitialise_diverged
         self._compiled: CompiledFilter | None = None  # set by from_model where it can
+        selection = self._H is not None and p == 0 and bool(np.all(
+            (self._H == 0) | (self._H == 1)) and np.all(self._H.sum(axis=1) == 1))
+        if compiled is not None and compiled.p == 0 and compiled.n == n and selection:
+            self._disturbance_row = np.zeros(0)
+            self._compiled = CompiledFilter(compiled, np.argmax(self._H, axis=1), 0)
+            self._compiled.compile(m, self.n_inputs)  # now: a caller may say it compiles
         self.bind(batch_size)
 
     # -- construction from the project's models and environments --------------------------
@@ -555,8 +565,15 @@ class ExtendedKalmanFilter(Estimator):
 
 def rts_smooth(result: FilterResult) -> SmootherResult:
     """Rauch-Tung-Striebel smoothing of a forward run: ``C_k = P_k Phi_k' P_pred_{k+1}^-1``,
-    ``x_s,k = x_k + C_k (x_s,k+1 - x_pred,k+1)``, ``P_s,k = P_k + C_k (P_s,k+1 - P_pred,k+1) C_k'``.
+    ``x_s,k = x_k + C_k (x_s,k+1 - x_pred,k+1)``, ``P_s,k = P_k + C_k (P_s,k+1 - P_pred,k+1) C_k'``;
+    compiled (:func:`~estimators.ekf_compiled.rts_loop`) for a finite run, the numpy loop below
+    (the reference) otherwise.
     """
+    arrays = (result.x, result.P, result.x_pred, result.P_pred, result.transition)
+    if all(np.isfinite(a).all() for a in arrays):  # (else numpy's NaNs, not numba's error)
+        x, P = np.empty_like(result.x), np.empty_like(result.P)
+        rts_loop(*(np.ascontiguousarray(a) for a in arrays), x, P)
+        return SmootherResult(x, P, result)
     x, P = result.x.copy(), result.P.copy()
     for k in range(x.shape[0] - 2, -1, -1):
         # C' = P_pred^-1 Phi P (P and P_pred symmetric)

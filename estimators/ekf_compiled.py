@@ -32,7 +32,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from marine_envs.compiled import jit, local_array
+from marine_envs.compiled import compile_for, jit, local_array
 from marine_envs.models import VehicleModel
 from marine_envs.models.rov import HYDRO_COEFFICIENTS, MORPHING, ROVModel, rov_features
 
@@ -92,8 +92,8 @@ def compiled_dynamics(model: VehicleModel, parameters: Sequence[str]) -> Compile
         return None
     n = len(model.state_names)
     if not parameters:
-        return CompiledDynamics(equations.core, equations.rk4, _same_constants,
-                                _no_parameters, constants.copy(),
+        return CompiledDynamics(equations.core, equations.rk4, same_constants,
+                                no_parameters, constants.copy(),
                                 (np.zeros(0), np.zeros(0, dtype=np.int64)), n, 0)
     if type(model) is ROVModel and set(parameters) <= set(HYDRO_COEFFICIENTS):
         return coefficient_dynamics(model, tuple(parameters))
@@ -101,12 +101,12 @@ def compiled_dynamics(model: VehicleModel, parameters: Sequence[str]) -> Compile
 
 
 @jit
-def _same_constants(theta, table, q):
+def same_constants(theta, table, q):
     """Constants that do not depend on the parameters: left as they are."""
 
 
 @jit
-def _no_parameters(x, u, d, q, table, A):
+def no_parameters(x, u, d, q, table, A):
     """The parameter Jacobian of dynamics without parameters: nothing."""
 
 
@@ -286,6 +286,18 @@ class CompiledFilter:
         self._predict(x, P, _c(u), d, self._q, self.dynamics.table, dt / substeps,
                       substeps, dt, _c(Q), _c(noise), x_out, P_out, T)
         return x_out, P_out, T
+
+    def compile(self, m: int, n_u: int) -> None:
+        """Compile the kernels for ``m`` channels and ``n_u`` inputs now (loaded from the
+        disk cache when it holds them), as the first prediction and update would."""
+        size, n = self.dynamics.n + self.dynamics.p, self.dynamics.n
+        x, P = np.zeros((1, size)), np.zeros((1, size, size))
+        compile_for(self._predict, x, P, np.zeros((1, n_u)), np.zeros((1, self._n_d)),
+                    self._q, self.dynamics.table, 0.1, 1, 0.1, np.zeros((n, n)),
+                    np.zeros(self.dynamics.p), x, P, np.zeros((1, n, size)))
+        e, S = np.zeros((1, m)), np.zeros((1, m, m))
+        compile_for(update, x, P, e, np.ones((1, m), dtype=np.bool_), self.measured,
+                    np.eye(m), x, P, S, np.zeros(1), np.ones(1, dtype=np.bool_))
 
     def update(self, x: FloatArray, P: FloatArray, e: FloatArray, valid: NDArray[np.bool_],
                R: FloatArray
@@ -639,3 +651,20 @@ def _finite(v):
         if not np.isfinite(v[i]):
             return False
     return True
+
+
+@jit
+def rts_loop(x, P, x_pred, P_pred, transition, x_out, P_out):
+    """The Rauch-Tung-Striebel recursion of :func:`estimators.ekf.rts_smooth` over a finite
+    forward run of ``N`` filters (``x`` ``(T, N, n)``, ``P`` ``(T, N, n, n)``, ...), written to
+    ``x_out`` and ``P_out``: the same solve and products, without a Python step per sample."""
+    T, N, n = x.shape
+    x_out[T - 1] = x[T - 1]
+    P_out[T - 1] = P[T - 1]
+    for k in range(T - 2, -1, -1):
+        for b in range(N):
+            Ct = np.linalg.solve(P_pred[k + 1, b], np.dot(transition[k, b], P[k, b]))
+            C = np.ascontiguousarray(Ct.T)
+            x_out[k, b] = x[k, b] + np.dot(C, x_out[k + 1, b] - x_pred[k + 1, b])
+            Pk = P[k, b] + np.dot(np.dot(C, P_out[k + 1, b] - P_pred[k + 1, b]), Ct)
+            P_out[k, b] = (Pk + Pk.T) * 0.5

@@ -176,9 +176,11 @@ def response_loop(M, Gamma, PhiK, H, L_inv, w, v, ar, out):
     Gamma_k w_k - PhiK_k v_k`` from ``d_0 = 0``, ``g_k = H_k d_k + L_inv_k v_k``, each channel
     through its filter ``ar`` (:func:`fir`; the last ``g`` kept in a ring, so that ``out`` is
     written once). ``w`` ``(T, n_w, R)`` enters the first ``n_w`` states; ``v`` ``(T, m, R)``,
-    or ``(T, 0, R)`` for none."""
+    or ``(T, 0, R)`` for none. Only the states a term enters anywhere are read (a candidate
+    enters one equation: the rest of ``Gamma_k w_k`` is zeros)."""
     T, m, R = out.shape
-    n, n_w, n_v, taps = M.shape[1], w.shape[1], v.shape[1], ar.shape[1]
+    n, n_v, taps = M.shape[1], v.shape[1], ar.shape[1]
+    entered = _entered(w)
     d, ahead = np.zeros((n, R)), np.empty((n, R))
     ring = np.empty((taps, m, R))
     for k in range(T):
@@ -200,7 +202,7 @@ def response_loop(M, Gamma, PhiK, H, L_inv, w, v, ar, out):
             row[:] = 0.0
             for ll in range(n):
                 _axpy(M[k, i, ll], d[ll], row)
-            for ll in range(n_w):
+            for ll in entered:
                 _axpy(Gamma[k, i, ll], w[k, ll], row)
             for c in range(n_v):
                 _axpy(-PhiK[k, i, c], v[k, c], row)
@@ -246,6 +248,21 @@ def fir(a, x):
             for i in range(min(a.shape[1], k + 1)):
                 _axpy(a[j, i], x[k - i, j], total)
             x[k, j] = total
+
+
+@jit
+def _entered(w):
+    """The states ``l`` whose ``w[:, l, :]`` ``(T, n_w, R)`` is not all zeros."""
+    T, n_w, R = w.shape
+    entered = np.zeros(n_w, dtype=np.bool_)
+    for k in range(T):
+        for ll in range(n_w):
+            if not entered[ll]:
+                for r in range(R):
+                    if w[k, ll, r] != 0.0:
+                        entered[ll] = True
+                        break
+    return np.flatnonzero(entered)
 
 
 @jit

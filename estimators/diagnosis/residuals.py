@@ -37,12 +37,14 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import linalg, ndimage, signal
 
-from marine_envs.compiled import jit
-from marine_envs.models import VehicleModel
+from marine_envs import compiled
+from marine_envs.compiled import first_use, jit, local_array
+from marine_envs.models import MeasuredDisturbances, VehicleModel
 from marine_envs.models.integrate import rk4
 from marine_envs.recording import Recording
 
 from ..ekf import ExtendedKalmanFilter
+from ..ekf_compiled import CompiledDynamics, no_parameters, same_constants
 from .innovations import Innovations, c_array
 
 FloatArray = NDArray[np.float64]
@@ -604,27 +606,31 @@ def _filter(model: VehicleModel, dt: float, channels: tuple[str, ...], q: FloatA
     tau = np.array([f.tau for f in forcing])
     variance = np.array([f.variance for f in forcing])
     outputs = [model.output_names.index(c) for c in channels]
-    if not forcing and sea is None and model.output_names == model.state_names:
-        h: Any = np.eye(n)[outputs]  # a matrix, as ExtendedKalmanFilter.from_model's
+    dynamics = AugmentedDynamics(model, own, environment, sea)
+    if model.output_names == model.state_names:
+        h: Any = np.eye(dynamics.width)[outputs]  # a matrix: the compiled filter's update
+        fast = compiled_augmented(dynamics)
     else:
         def h(z: FloatArray) -> FloatArray:
             return model.output(z[:, :n])[:, outputs]
+        fast = None
 
     decay = np.exp(-2 * dt / tau)
     waves = np.zeros((0, 0)) if sea is None else sea.step_noise(dt)
     Q = linalg.block_diag(np.diag(np.concatenate([q, variance * (1 - decay)])), waves,
                           np.zeros((len(steady), len(steady))))
-    dynamics = AugmentedDynamics(model, own, environment, sea)
     names = ([f"forcing_{model.state_names[i]}" for i in dynamics.rows]
              + [model.disturbance_names[c] for c in dynamics.channels]
              + ["sea", "sea_quadrature"][:_width(sea)]
              + [f"steady_{model.disturbance_names[c]}" for c in dynamics.steady])
     prior = np.concatenate([variance, np.ones(_width(sea)), [f.steady for f in steady]])
-    return ExtendedKalmanFilter(
-        dynamics, h, dt=dt, Q=Q, R=np.diag(noise**2), n_inputs=len(model.input_names),
-        state_names=(*model.state_names, *names),
-        measurement_names=channels, x0=np.concatenate([x0, np.zeros(len(prior))]),
-        P0=linalg.block_diag(P0, np.diag(prior)), substeps=substeps)
+    with first_use(f"{model.name} diagnosis"):  # compiled as the filter is made
+        return ExtendedKalmanFilter(
+            dynamics, h, dt=dt, Q=Q, R=np.diag(noise**2), n_inputs=len(model.input_names),
+            state_names=(*model.state_names, *names),
+            measurement_names=channels, x0=np.concatenate([x0, np.zeros(len(prior))]),
+            P0=linalg.block_diag(P0, np.diag(prior)), substeps=substeps,
+            compiled=fast)
 
 
 class AugmentedDynamics:
@@ -718,6 +724,113 @@ def augmented_rows(core: Callable[..., None]) -> Callable[..., None]:
                 out[j] = -z[j] / tau[j - n]
             for j in range(n_f, out.size):
                 out[j] = 0.0
+
+    return augmented
+
+
+#: Largest relative difference between the compiled filter's dynamics and
+#: :class:`AugmentedDynamics` on trial states (rounding only: the same equations, in the same
+#: order); beyond it the filter keeps the numpy path.
+SAME_DYNAMICS = 1e-12
+
+
+def compiled_augmented(dynamics: AugmentedDynamics) -> CompiledDynamics | None:
+    """``dynamics`` as the compiled filter's kernels take them (:mod:`estimators.ekf_compiled`:
+    one boat's ``f(z, u, d, q, out)`` and its constants ``q``), so that the diagnosis's filter
+    predicts and updates compiled; None for a model without compiled equations, or when the
+    kernel does not reproduce ``dynamics`` on trial states (a filter the kernel was not written
+    for keeps the numpy path). A model with measured disturbances
+    (:class:`~marine_envs.models.MeasuredDisturbances`, a ROV's logged morph command) takes
+    them from the inputs after its actuators'.
+
+    ``q``: the numbers of own forcings, environment channels, steady parts, measured
+    disturbances and sea states, the model's packed constants, the forcings' correlation
+    times, then (as floats) the equations of the own forcings and the model's disturbance
+    channels of the environment, of their steady parts and of the measured disturbances, then
+    the sea's dynamics and gains (row-major): read as the kernel runs, so that one kernel per
+    vehicle serves every forcing model (compiled once)."""
+    model = dynamics.model
+    base = model.model if isinstance(model, MeasuredDisturbances) else model
+    if type(base).equations is None or type(base).rhs is not VehicleModel.rhs \
+            or base.constants.ndim != 1:
+        return None
+    names = base.disturbance_names
+    rest = np.array([names.index(c) for c in model.disturbance_names], dtype=np.int64)
+    measured = [names.index(c) for c in getattr(model, "measured_disturbances", ())]
+    constants = np.asarray(base.constants, dtype=float)
+    counts = [dynamics.rows.size, dynamics.channels.size, dynamics.steady.size, len(measured),
+              dynamics.sea_F.shape[0]]
+    q = np.concatenate([counts, constants, dynamics.tau, dynamics.rows,
+                        rest[dynamics.channels], rest[dynamics.steady], measured,
+                        dynamics.sea_F.ravel(), dynamics.sea_G.ravel()]).astype(float)
+    f = augmented_core(type(base).equations.core, dynamics.n, constants.size,
+                       len(base.input_names), len(names))
+    made = CompiledDynamics(f, compiled.rk4(f), same_constants, no_parameters, q,
+                            (np.zeros(0), np.zeros(0, dtype=np.int64)), dynamics.width, 0)
+    return made if _reproduces(made, dynamics) else None
+
+
+def _reproduces(made: CompiledDynamics, dynamics: AugmentedDynamics) -> bool:
+    """Whether ``made.f`` gives ``dynamics``'s derivatives on a few random states and inputs."""
+    rng = np.random.default_rng(0)
+    model = dynamics.model
+    z = np.concatenate([model.x0, np.zeros(made.n - dynamics.n)]) \
+        + 0.1 * rng.standard_normal((4, made.n))
+    u = model.u0 + 0.1 * rng.standard_normal((4, len(model.input_names)))
+    expected = dynamics(z, u, np.zeros((4, 0)))
+    got = np.empty_like(expected)
+    for b in range(len(z)):
+        made.f(z[b], u[b], np.zeros(0), made.constants, got[b])
+    scale = np.maximum(np.abs(expected), 1.0)
+    return bool(np.all(np.abs(got - expected) <= SAME_DYNAMICS * scale))
+
+
+@functools.cache
+def augmented_core(core: Callable[..., None], n: int, n_p: int, n_act: int,
+                   n_d: int) -> Callable[..., None]:
+    """One boat's :class:`AugmentedDynamics` ``f(z, u, d, q, out)`` (``d`` unused: the
+    environment is in ``z``) of a model's equations ``core(x, u, d, p, out)`` with ``n``
+    states, ``n_p`` constants, ``n_act`` actuator inputs (then any measured disturbances) and
+    ``n_d`` disturbance channels; ``q`` as :func:`compiled_augmented` packs it. Made once per
+    process, compiled once per machine."""
+    width = max(n_d, 1)  # (a literal size for the scratch on the stack)
+
+    @jit
+    def augmented(z, u, d, q, out):
+        n_own, n_env, n_steady = int(q[0]), int(q[1]), int(q[2])
+        n_measured, n_sea = int(q[3]), int(q[4])
+        n_gm = n + n_own + n_env
+        n_f = n_gm + n_sea
+        at_tau = 5 + n_p
+        at_rows = at_tau + n_own + n_env
+        at_channels = at_rows + n_own
+        at_steady = at_channels + n_env
+        at_measured = at_steady + n_steady
+        at_sea_F = at_measured + n_measured
+        at_sea_G = at_sea_F + n_sea * n_sea
+        full = local_array(width)
+        for j in range(n_d):
+            full[j] = 0.0
+        for j in range(n_env):
+            full[int(q[at_channels + j])] = z[n + n_own + j]
+        for j in range(n_steady):
+            full[int(q[at_steady + j])] += z[n_f + j]
+        for j in range(n_measured):
+            full[int(q[at_measured + j])] = u[n_act + j]
+        core(z[:n], u[:n_act], full[:n_d], q[5:5 + n_p], out[:n])
+        for j in range(n_own):
+            out[int(q[at_rows + j])] += z[n + j]
+        for j in range(n, n_gm):
+            out[j] = -z[j] / q[at_tau + j - n]
+        for i in range(n_sea):
+            for j in range(n):
+                out[j] += q[at_sea_G + j * n_sea + i] * z[n_gm + i]
+            total = 0.0
+            for j in range(n_sea):
+                total += q[at_sea_F + i * n_sea + j] * z[n_gm + j]
+            out[n_gm + i] = total
+        for j in range(n_f, out.size):
+            out[j] = 0.0
 
     return augmented
 
