@@ -54,6 +54,17 @@ def test_a_draw_keeps_to_its_filters_and_refuses_unknown_names():
         draw(0, ("hydrofoil",), ("open_loop",))
 
 
+def test_an_environment_hides_only_what_its_equations_can_carry():
+    """No parameter change or wave-frequency term in an environment (``effects=`` refuses
+    them); actuator effects only because the environments report the command."""
+    from marine_envs.models.effects import INPUT_EFFECTS
+
+    for vehicle in scenarios.VEHICLES:
+        drawn = {effect for effect, *_ in scenarios.effect_entries(vehicle, "environment")}
+        assert drawn <= set(scenarios.ENVIRONMENT_EFFECTS) | set(INPUT_EFFECTS), vehicle
+        assert scenarios.commands_recorded(vehicle)
+
+
 @pytest.mark.parametrize("generator", GENERATORS)
 def test_each_generator_records_its_vehicles(generator):
     for vehicle in VEHICLES:

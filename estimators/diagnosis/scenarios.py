@@ -58,7 +58,13 @@ import scipy.linalg
 import scipy.signal
 
 from marine_envs.models import VehicleModel, get_model
-from marine_envs.models.effects import ActuatorStream, Effect, EffectModel, resonator
+from marine_envs.models.effects import (
+    INPUT_EFFECTS,
+    ActuatorStream,
+    Effect,
+    EffectModel,
+    resonator,
+)
 from marine_envs.recording import Recording
 
 from .cases import ACCEPTANCE_VEHICLES, PARTIAL, TARGETS, Case, Entry, Outcome, build_effect, score
@@ -228,14 +234,15 @@ def _draw_settings(seed: int, pairs: Sequence[tuple[str, str]],
 def effect_entries(vehicle: str, generator: str,
                    measured: Sequence[str] | None = None) -> list[Entry]:
     """The :data:`cases.TARGETS` entries ``generator`` can hide on ``vehicle`` (recording
-    ``measured``): an environment reporting only the applied input hides no actuator effect,
-    nor a parameter change or wave-frequency term (not time-invariant); a sensor bias needs its
-    channel recorded; in open loop, a bias of a heading or position (which nothing holds) is
-    the unknown initial value, so no sensor bias of a displacement."""
+    ``measured``): an environment hides no parameter change or wave-frequency term (not
+    time-invariant), nor an actuator effect if it reports only the applied input; a sensor
+    bias needs its channel recorded; in open loop, a bias of a heading or position (which
+    nothing holds) is the unknown initial value, so no sensor bias of a displacement."""
     entries = list(TARGETS[vehicle])
     channels = set(measured or _usual_channels(vehicle, generator))
-    if generator == "environment" and not commands_recorded(vehicle):
-        entries = [e for e in entries if e[0] in ENVIRONMENT_EFFECTS]
+    if generator == "environment":
+        hidden = ENVIRONMENT_EFFECTS + (INPUT_EFFECTS if commands_recorded(vehicle) else ())
+        entries = [e for e in entries if e[0] in hidden]
     entries = [e for e in entries if e[0] != "sensor_bias" or e[1] in channels]
     if generator == "open_loop":
         model = get_model(vehicle)
