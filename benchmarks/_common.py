@@ -159,6 +159,17 @@ def add_docs_option(parser: argparse.ArgumentParser, name: str) -> None:
                         f"docs/results/{name}.md)")
 
 
+def chosen_names(parser: argparse.ArgumentParser, text: str, known: Sequence[str],
+                 what: str) -> list[str]:
+    """The comma-separated names in ``text`` (an option's value), each one of ``known``; an
+    unknown or empty choice is the parser's error (one line, exit 2), naming the known ones."""
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = sorted(set(names) - set(known))
+    if unknown or not names:
+        parser.error(f"unknown {what}(s) {unknown or '(none)'}; choose from {', '.join(known)}")
+    return names
+
+
 def check_page_path(parser: argparse.ArgumentParser, page: Path | None) -> None:
     """Refuse a page that cannot be written before the run, not after it."""
     if page is None:

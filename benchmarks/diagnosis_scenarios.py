@@ -38,7 +38,12 @@ from collections.abc import Iterable, Iterator, Sequence  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
-from _common import add_docs_option, benchmark_run, check_page_path  # noqa: E402
+from _common import (  # noqa: E402
+    add_docs_option,
+    benchmark_run,
+    check_page_path,
+    chosen_names,
+)
 from tqdm import tqdm  # noqa: E402
 
 from estimators.diagnosis.scenarios import GENERATORS, TIMEOUT, VEHICLES, run_seed  # noqa: E402
@@ -224,15 +229,6 @@ def _show(run: Any, text: str, heading: str, markdown: bool = True) -> None:
 
 
 # -- the command line -----------------------------------------------------------------------------
-def _names(text: str, known: Sequence[str], what: str,
-           parser: argparse.ArgumentParser) -> list[str]:
-    names = [n.strip() for n in text.split(",") if n.strip()]
-    unknown = sorted(set(names) - set(known))
-    if unknown or not names:
-        parser.error(f"unknown {what}(s) {unknown or '(none)'}; choose from {', '.join(known)}")
-    return names
-
-
 def _seeds(text: str, parser: argparse.ArgumentParser) -> list[int]:
     try:
         seeds = [int(s) for s in text.split(",") if s.strip()]
@@ -268,8 +264,8 @@ def parse(argv: Sequence[str]) -> argparse.Namespace:
                         help="no run: the tables of the rows in these --json outputs")
     add_docs_option(parser, "diagnosis_scenarios")
     args = parser.parse_args(argv)
-    args.generators = _names(args.generators, GENERATORS, "generator", parser)
-    args.vehicles = _names(args.vehicles, VEHICLES, "vehicle", parser)
+    args.generators = chosen_names(parser, args.generators, GENERATORS, "generator")
+    args.vehicles = chosen_names(parser, args.vehicles, VEHICLES, "vehicle")
     if args.cases < 1:
         parser.error(f"--cases {args.cases}: at least 1")
     if args.tuning and args.cases > len(TUNING_SEEDS):

@@ -34,7 +34,12 @@ from collections.abc import Sequence  # noqa: E402
 from dataclasses import asdict, dataclass  # noqa: E402
 
 import numpy as np  # noqa: E402
-from _common import add_docs_option, benchmark_run, check_page_path  # noqa: E402
+from _common import (  # noqa: E402
+    add_docs_option,
+    benchmark_run,
+    check_page_path,
+    chosen_names,
+)
 
 from estimators.diagnosis import diagnose, synthesize, typical_effect  # noqa: E402
 from estimators.diagnosis.residuals import white_noise_std  # noqa: E402
@@ -165,10 +170,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--json", metavar="OUT", help="write every row as JSON")
     add_docs_option(parser, "diagnosis_speed")
     args = parser.parse_args(argv)
-    vehicles = [v.strip() for v in args.vehicles.split(",") if v.strip()]
-    unknown = sorted(set(vehicles) - set(VEHICLES))
-    if unknown:
-        parser.error(f"unknown vehicle(s) {unknown}; choose from {', '.join(VEHICLES)}")
+    vehicles = chosen_names(parser, args.vehicles, VEHICLES, "vehicle")
     check_page_path(parser, args.docs)
     rows: list[Row] = []
     with benchmark_run("diagnosis_speed", argv) as bench:

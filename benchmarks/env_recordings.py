@@ -42,7 +42,12 @@ from collections.abc import Sequence  # noqa: E402
 from dataclasses import asdict  # noqa: E402
 
 import numpy as np  # noqa: E402
-from _common import add_docs_option, benchmark_run, check_page_path  # noqa: E402
+from _common import (  # noqa: E402
+    add_docs_option,
+    benchmark_run,
+    check_page_path,
+    chosen_names,
+)
 from tqdm import tqdm  # noqa: E402
 
 from agents.simulate import simulate  # noqa: E402
@@ -194,10 +199,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--json", metavar="OUT", help="write every outcome as JSON")
     add_docs_option(parser, "env_recordings")
     args = parser.parse_args(argv)
-    vehicles = [v.strip() for v in args.vehicles.split(",") if v.strip()]
-    unknown = sorted(set(vehicles) - set(VEHICLES))
-    if unknown:
-        parser.error(f"unknown vehicle(s) {unknown}; choose from {', '.join(VEHICLES)}")
+    vehicles = chosen_names(parser, args.vehicles, VEHICLES, "vehicle")
     if args.ideal and not args.instrumented:
         parser.error("--ideal goes with --instrumented")
     kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
