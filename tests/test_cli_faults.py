@@ -46,8 +46,9 @@ def _snapshot(root: Path) -> dict[str, bytes | None]:
 def workspace(tmp_path_factory) -> Path:
     """A recording to diagnose (and its variants a command-line user gets wrong)."""
     root = tmp_path_factory.mktemp("workspace")
-    assert main(["simulate", "--steps", "200", "--seed", "1", "--out", str(root / "run.csv"),
-                 "--quiet"]) == 0
+    for seed, name in ((1, "run.csv"), (2, "run2.csv")):
+        assert main(["simulate", "--steps", "200", "--seed", str(seed), "--out",
+                     str(root / name), "--quiet"]) == 0
     t = np.arange(50) * 0.1
     t[30:] += 0.05  # a logger that slipped once
     uneven = Recording.from_arrays("usv", t, np.zeros(50), {"psi": np.zeros(50)},
@@ -143,8 +144,10 @@ FAULTS = [
     Fault("diagnose a CSV without sidecar", "diagnose {w}/no_sidecar.csv",
           "give --model", not_said="model=..."),
     Fault("diagnose a series by innovations",
-          "diagnose {w}/run.csv {w}/run.csv --quiet --method innovations",
+          "diagnose {w}/run.csv {w}/run2.csv --quiet --method innovations",
           "use --method free (or auto)", not_said="method='free'"),
+    Fault("diagnose one recording twice", "diagnose {w}/run.csv {w}/run.csv --quiet",
+          "the same recording is given twice"),
 ]
 
 

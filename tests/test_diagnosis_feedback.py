@@ -62,7 +62,8 @@ def test_a_real_rudder_gain_holds_on_the_dither(seed):
 def test_the_confirmation_withdraws_it_and_says_why():
     res = closed_loop(1.0, seed=0)
     found = SimpleNamespace(effect=Effect("input_gain", "delta", {"k": 0.7}), held_out_p=1e-6,
-                            alone=0.2)  # the search's and the held-out tests passed
+                            alone=0.2, alone_z=2.0, innovation_gain=0.05)  # the held-out
+    # tests passed: the innovations (an actuator effect is judged on them) and the predictions
     why = seaway._unconfirmed_because(found, res, DiagnosisConfig())
     assert why.startswith("the input follows the controller")
     finding = Finding("input_gain", "delta", {"k": 0.7}, {}, 1.0, 0.2, "", withdrawn=why)

@@ -2,14 +2,22 @@
 confirmed on the held-out data that fit them, and never a finding that does not improve
 held-out data."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
 from agents.simulate import simulate
-from estimators.diagnosis import diagnose, seaway, synthesize, typical_effect
+from estimators.diagnosis import (
+    DiagnosisConfig,
+    diagnose,
+    seaway,
+    synthesize,
+    typical_effect,
+)
 from estimators.diagnosis.residuals import white_noise_std
 from marine_envs.models import get_model
-from marine_envs.models.effects import ActuatorStream
+from marine_envs.models.effects import ActuatorStream, Effect
 from marine_envs.recording import Recording
 
 
@@ -74,4 +82,12 @@ def test_no_finding_with_a_negative_held_out_improvement():
     assert diagnosis.mismatch is not None
     assert all(f.improvement > 0 for f in diagnosis.findings), diagnosis.summary()
     assert not [f for f in diagnosis.findings if f.target == "v"], diagnosis.summary()
-    assert {f.target for f in diagnosis.unconfirmed} >= {"v"}
+    # such a term, which predicts the held-out innovations but makes the predictions
+    # significantly worse, is withdrawn, saying so (the numbers of the one measured)
+    spurious = SimpleNamespace(effect=Effect("coupling", "v", {"source": "p", "c": 0.1}),
+                               held_out_p=7e-4, innovation_gain=0.012, alone=-0.034,
+                               alone_z=-2.1)
+    why = seaway._unconfirmed_because(spurious, diagnosis.residuals, DiagnosisConfig())
+    assert "predictions worse" in why and "2.1 standard errors" in why
+    assert not seaway._unconfirmed_because(SimpleNamespace(**{**vars(spurious), "alone_z": -0.4}),
+                                           diagnosis.residuals, DiagnosisConfig())

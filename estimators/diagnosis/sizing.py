@@ -163,7 +163,7 @@ def decimated(recording: Recording, factor: int) -> Recording:
     """``recording`` at ``factor`` times its step: the measured channels low-passed and
     decimated (scipy's polyphase filter, zero phase; angles through their unwrapped values),
     the inputs and disturbances averaged over each new step (a held input's mean), as
-    :mod:`.output_error` resamples a model test."""
+    :mod:`estimators.diagnosis.output_error` resamples a model test."""
     n = len(recording.data) // factor * factor
     data = recording.data.iloc[:n]
     columns: dict[str, np.ndarray] = {TIME: data[TIME].to_numpy()[::factor]}

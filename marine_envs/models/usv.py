@@ -85,8 +85,9 @@ class USVModel(VehicleModel):
     state_units: ClassVar[tuple[str, ...]] = ("m/s", "rad/s", "rad", "rad/s", "rad")
     input_units: ClassVar[tuple[str, ...]] = ("rad",)
     disturbance_units: ClassVar[tuple[str, ...]] = ("rad/s^2", "rad/s^2")
-    #: Both wave moments follow the transverse wave slope (:class:`~marine_envs.sea.coupling.
-    #: USVWaveCoupling`): the yaw moment is a fixed multiple of the roll moment in any sea.
+    #: Both wave moments follow the transverse wave slope
+    #: (:class:`~marine_envs.sea.USVWaveCoupling`): the yaw moment is a fixed multiple of the
+    #: roll moment in any sea.
     wave_disturbances: ClassVar[tuple[str, ...]] = ("w_psi", "w_phi")
     #: The USV observer patent's measured channels: p = 4, sway speed v is not measured.
     measured_names: ClassVar[tuple[str, ...]] = ("r", "psi", "p", "phi")
