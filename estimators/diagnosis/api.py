@@ -5,7 +5,7 @@ and the names to calibrate, the same recording given twice, the recordings' mode
 columns and sample step (:func:`.sizing.step_problem`: time in milliseconds, a decimation too
 large), and an angle and its rate a degree factor apart (:func:`_degree_slips`). A record in a
 seaway is then sized to the method's step and sample budget (:mod:`.sizing`). Then chooses the way
-the record is judged: model tests (a series, a free decay) go to :mod:`.model_test`, judged in
+the record is judged: model tests (a series, a free decay) go to :mod:`.free_simulation`, judged in
 free simulation; a record in a seaway to :mod:`.seaway`, judged by the nominal filter's
 innovations; either way, a record with actuator position sensors gets the actuators' effects
 read off them (:mod:`.actuators`) and its hull judged on the positions. A recording the tool
@@ -26,7 +26,7 @@ from marine_envs.models import MeasuredDisturbances, VehicleModel, get_model
 from marine_envs.recording import Recording, read_recording
 
 from . import actuators, sizing
-from .model_test import diagnose_series
+from .free_simulation import diagnose_series
 from .result import Diagnosis
 from .seaway import SEAWAY_STAGES, Stage, check, diagnose_seaway, other_model
 from .selection import DiagnosisConfig
@@ -61,12 +61,12 @@ def diagnose(recording: Recording | str | Path | Sequence[Recording | str | Path
         *structure* leaves out remains; names, or one comma-separated string.
     :param config: the sea-record search's configuration (one default for every case).
     :param method: ``"free"``: judge in free simulation (model tests: decays, zigzags, lab
-        runs; :mod:`.model_test`); ``"innovations"``: the smoother and filter innovations of
+        runs; :mod:`.free_simulation`); ``"innovations"``: the smoother and filter innovations of
         a record in a seaway; ``"auto"``: free simulation for a series or a free decay (inputs
         held), the innovations otherwise.
     :param log: called with a line on what the (seconds-long) search is doing.
     :param stage: called at the start of each stage with its name, index and the number of
-        stages (:data:`SEAWAY_STAGES`, or :data:`.model_test.FREE_STAGES`): for a progress bar.
+        stages (:data:`SEAWAY_STAGES`, or :data:`.free_simulation.FREE_STAGES`): for a progress bar.
 
     A sample a logger dropped (NaN in a measured channel) is a missing measurement: the
     filters predict through it, and the free simulation compares with the record's value

@@ -30,7 +30,7 @@ from scipy import signal
 from marine_envs.files import WriteError, write_text
 from marine_envs.models.effects import Effect, applied_inputs, state_term
 
-from . import model_test_figures, model_test_report
+from . import free_simulation_figures, free_simulation_report
 from .report_format import cell, change, num, parameters, pyplot, save, slug
 from .residuals import Residuals
 from .result import Diagnosis, Finding
@@ -110,7 +110,7 @@ def _write_into(diagnosis: Diagnosis, directory: Path, recording_name: str) -> N
     diagnosis.to_json(directory / "diagnosis.json")
     figures: list[tuple[str, str]] = []
     if diagnosis.comparison is not None:  # a model test, judged in free simulation
-        figures = model_test_figures.write_figures(diagnosis, directory, recording_name)
+        figures = free_simulation_figures.write_figures(diagnosis, directory, recording_name)
     elif diagnosis.mismatch is not None and diagnosis.residuals is not None:
         figures = write_figures(diagnosis, directory)
     write_text(directory / "report.md", markdown(diagnosis, figures, recording_name))
@@ -133,7 +133,7 @@ def markdown(diagnosis: Diagnosis, figures: Sequence[tuple[str, str]] = (),
              recording_name: str = "") -> str:
     """The report's text; ``figures`` are ``(relative file name, caption)`` pairs."""
     if diagnosis.comparison is not None:  # a model test, judged in free simulation
-        return model_test_report.markdown(diagnosis, figures, recording_name)
+        return free_simulation_report.markdown(diagnosis, figures, recording_name)
     title = recording_name or diagnosis.model
     parts = [f"# Mismatch diagnosis: {cell(title)}", "",
              f"Model: `{diagnosis.model}`" + (f" · recording: `{recording_name}`"

@@ -1,7 +1,7 @@
-"""The report of a model-test diagnosis (free simulation, :mod:`.model_test`).
+"""The report of a model-test diagnosis (free simulation, :mod:`.free_simulation`).
 
 :func:`~estimators.diagnosis.report.write_report` hands a diagnosis with a ``comparison`` to this
-module: its figures (:mod:`.model_test_figures`) and the text of ``report.md``: verdict, model
+module: its figures (:mod:`.free_simulation_figures`) and the text of ``report.md``: verdict, model
 check, calibrated parameters, findings (with each equation's standard form), held-out free
 simulation, alternatives, what is left unexplained, the figures and how to read them.
 """
@@ -16,8 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .comparison import Comparison
-from .model_test import standard_form
-from .model_test_figures import channel_units, display_unit, with_degrees
+from .free_simulation import standard_form
+from .free_simulation_figures import channel_units, display_unit, with_degrees
 from .modes import MODE_TOLERANCE, free_decays, model_modes
 from .output_error import Fit
 from .report_format import cell, change, num, parameters

@@ -7,7 +7,7 @@ import pandas as pd
 import pytest
 
 from estimators.diagnosis import Diagnosis, Finding, diagnose
-from estimators.diagnosis.model_test_report import (
+from estimators.diagnosis.free_simulation_report import (
     display_unit,
     verdict,
 )

@@ -1,5 +1,5 @@
-"""The figures of a model-test report (:mod:`.model_test_report`), written by
-:func:`~estimators.diagnosis.model_test_figures.write_figures`:
+"""The figures of a model-test report (:mod:`.free_simulation_report`), written by
+:func:`~estimators.diagnosis.free_simulation_figures.write_figures`:
 
 * ``time_histories.png``: per run and measured channel, the measured record (black), the
   nominal model's free simulation (blue) and the model with the findings (orange), angles in

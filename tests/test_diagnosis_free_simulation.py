@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from estimators.diagnosis import diagnose
-from estimators.diagnosis.model_test_report import markdown
+from estimators.diagnosis.free_simulation_report import markdown
 from estimators.diagnosis.modes import decay_analysis, model_modes, nearest_mode
 from estimators.diagnosis.output_error import Coordinates, Series, Structure, basis
 from marine_envs.models import get_model
