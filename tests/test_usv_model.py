@@ -102,7 +102,7 @@ def test_get_model_names_and_errors():
     with pytest.raises(ValueError, match="unknown model 'ship'"):
         get_model("ship")
     assert set(model_names()) == {"usv", "hydrofoil", "rov", "dp_vessel", "hovercraft",
-                                 "nomoto"}
+                                 "nomoto", "mmg"}
 
 
 def test_rhs_rejects_wrong_shapes():

@@ -26,6 +26,7 @@ _MODELS: dict[str, str] = {
     "dp_vessel": "dp_vessel:DPVesselModel",
     "hovercraft": "hovercraft:HovercraftModel",
     "nomoto": "nomoto:NomotoModel",
+    "mmg": "mmg:MMGModel",
 }
 
 
