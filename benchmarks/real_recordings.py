@@ -65,6 +65,7 @@ from scipy import optimize, signal  # noqa: E402
 
 from estimators.diagnosis import diagnose  # noqa: E402
 from marine_envs.files import write_json  # noqa: E402
+from marine_envs.readers import read_hsva_zigzag  # noqa: E402
 from marine_envs.recording import Recording, read_recording  # noqa: E402
 
 TITLE = "Diagnosis of real recordings"
@@ -144,22 +145,6 @@ def _decay_recording(phi: np.ndarray, rate: float, name: str) -> Recording:
     time_ = np.arange(len(phi)) / rate
     return Recording.from_arrays("usv", time_, np.zeros(len(phi)), {"phi": phi},
                                  meta={"name": name})
-
-
-def read_hsva_zigzag(path: str | Path) -> Recording:
-    """An HSVA zigzag ``.dat`` (4 latin-1 header lines, 12 columns at 20 Hz: time s, x, y m,
-    psi deg, dx/dt, dy/dt m/s, r deg/s, roll deg, rudder deg, rpm, thrust, torque) as a
-    ``nomoto`` recording: input ``delta`` (rad, positive to port), measured ``r`` (rad/s) and
-    ``psi`` (rad, unwrapped, relative to the first sample); time from 0."""
-    path = Path(path)
-    table = np.loadtxt(path, skiprows=4, encoding="latin-1")
-    if table.ndim != 2 or table.shape[1] != 12:
-        raise ValueError(f"{path}: expected 12 columns, got shape {table.shape}")
-    psi = np.unwrap(np.radians(table[:, 3]))
-    time_ = np.round(table[:, 0] - table[0, 0], 9)
-    return Recording.from_arrays("nomoto", time_, np.radians(table[:, 8]),
-                                 {"r": np.radians(table[:, 6]), "psi": psi - psi[0]},
-                                 meta={"name": path.name})
 
 
 # -- reference fits -------------------------------------------------------------------------------
