@@ -8,7 +8,7 @@ rev/s): rudder angle in the HSVA records' convention (POSITIVE TO PORT, which gi
 r) and propeller speed; ``d = [w_r]`` (rad/s^2): a yaw acceleration added to ``r_dot``, as in
 :mod:`.nomoto`. The paper's rudder angle is positive to starboard: the one place that maps it is
 :func:`mmg_rhs` (``delta_mmg = -(delta + delta0)``; ``delta0`` is a rudder offset, the rudder
-``-delta0`` holding a straight course). Equations (the paper's 1-4, 7-15, 19-27)::
+``-delta0`` holding a straight course). Equations (the paper's, as recalled)::
 
     (m + m_x) u_dot - (m + m_y) v r - x_G m r^2   = X_H + X_R + X_P
     (m + m_y) v_dot + (m + m_x) u r + x_G m r_dot = Y_H + Y_R
@@ -36,11 +36,12 @@ which stays finite at J_P = 0.) The primed coefficients are the paper's non-dime
 (forces by 1/2 rho L d U^2, moments by 1/2 rho L^2 d U^2, masses by 1/2 rho L^2 d, J_z by
 1/2 rho L^4 d); the paper's ``Y'_R``, ``N'_R`` (yaw-rate derivatives) are ``Y_r``, ``N_r`` here.
 
-Defaults: the paper's KVLCC2 model-scale (L = 7 m) coefficients (its Table 3 "main
-particulars" for masses and rudder data and Table 4 "hydrodynamic force coefficients", as
-transcribed by the ShipMMG/shipmmg project's ``get_KVLCC2_L7`` parameters) with the HSVA model's
-main data (``../shared/data/zigzag_kvlcc2_hsva/ship_data.yml``: the model the zigzag records come
-from); where the two differ, the field's comment says so and which is used.
+Defaults: the paper's KVLCC2 model-scale (L = 7 m) coefficients (its tables of the model's
+principal particulars and of the hydrodynamic force coefficients; the paper was not at hand:
+the values are those transcribed identically by several public MMG implementations, e.g. the
+ShipMMG/shipmmg project's KVLCC2_L7 fixture) with the HSVA model's main data
+(``../shared/data/zigzag_kvlcc2_hsva/ship_data.yml``: the model the zigzag records come from);
+where the two differ, the field's comment says so and which is used (docs/models.md 8.2).
 """
 
 from __future__ import annotations
@@ -180,7 +181,8 @@ class MMGParams:
     C_1: float = 2.0  #: wake change with beta_P, -  [YY = HSVA]
     C_2_pos: float = 1.6  #: C_2 for beta_P > 0, -  [YY = HSVA]
     C_2_neg: float = 1.1  #: C_2 for beta_P < 0, -  [YY = HSVA]
-    #: propeller position, fraction of L (midship origin), -  [HSVA -3.386 m; YY -0.48]
+    #: propeller position, fraction of L (midship origin), -  [HSVA -3.386 m; YY -0.48 (other
+    #: transcriptions say -0.65 or -0.69); HSVA's used]
     x_P: float = -3.386 / 7.0
     # rudder
     A_R: float = 0.0539  #: rudder area, m^2  [YY = HSVA]
