@@ -318,7 +318,7 @@ class ZigzagCriteria:
     """
 
     amplitude: float  #: rudder amplitude A about the rudder's centre, rad
-    switch: float  #: heading change B at the rudder reversals (their mean), rad
+    switch: float  #: heading change B at the rudder reversals (:func:`_switch`), rad
     centre: float  #: the rudder's centre between its two plateaus, rad (an offset if not 0)
     rudder_rate: float | None  #: rudder slope between plateaus, rad/s; None = in one sample
     first_direction: int  #: +1: the rudder went positive first, -1 negative
@@ -353,7 +353,7 @@ def read_zigzag(time: ArrayLike, heading: ArrayLike, rudder: ArrayLike) -> Zigza
     The rudder's plateaus (its 5th and 95th percentiles) give A and the centre; an execute is
     where the rudder leaves a plateau, found by running back from its crossing of the midpoint
     at the rudder's own slope (a held sample: exact for an instantaneous or a rate-limited
-    rudder, as :func:`zigzag` moves it); B is the heading change at the reversals.
+    rudder, as :func:`zigzag` moves it); B is the heading change at the reversals (:func:`_switch`).
 
     :param time: (T,) s, uniform.  :param heading: (T,) rad.  :param rudder: (T,) rad, each
         sample held until the next.
@@ -385,7 +385,7 @@ def read_zigzag(time: ArrayLike, heading: ArrayLike, rudder: ArrayLike) -> Zigza
     change = np.unwrap(psi) - psi[start]
     first_direction = int(side[first])
     s1 = float(np.sign(change[executes[1]])) if len(executes) > 1 else math.nan
-    switch = float(np.mean(np.abs(change[executes[1:3]]))) if len(executes) > 1 else math.nan
+    switch = _switch(change, executes[1:])
     ends = [*executes[2:4], None, None]
     p1, i1 = _peak(change, executes[1], ends[0], s1) if len(executes) > 1 else (math.nan, -1)
     p2, _ = _peak(change, executes[2], ends[1], -s1) if len(executes) > 2 else (math.nan, -1)
@@ -397,6 +397,18 @@ def read_zigzag(time: ArrayLike, heading: ArrayLike, rudder: ArrayLike) -> Zigza
         reversal_times=rel[executes[1:]], initial_turning_time=float(rel[executes[1]]),
         first_overshoot=p1 - switch, second_overshoot=p2 - switch,
         first_peak_time=float(rel[i1]) if i1 >= 0 else math.nan)
+
+
+def _switch(change: FloatArray, reversals: list[int]) -> float:
+    """The heading check B of the reversals: between the largest |heading change| a sample
+    before one (not yet B) and the smallest at one (B reached), the middle; their mean when the
+    two disagree (a pilot who reversed late or early)."""
+    if not reversals:
+        return math.nan
+    at = np.abs(change[reversals])
+    before = np.abs(change[[max(i - 1, 0) for i in reversals]])
+    low, high = float(before.max()), float(at.min())
+    return (low + high) / 2 if low < high else float(at.mean())
 
 
 def _rudder_rate(delta: FloatArray, centre: float, amplitude: float, dt: float) -> float:
