@@ -358,7 +358,7 @@ def read_zigzag(time: ArrayLike, heading: ArrayLike, rudder: ArrayLike) -> Zigza
     :param time: (T,) s, uniform.  :param heading: (T,) rad.  :param rudder: (T,) rad, each
         sample held until the next.
     :raises ValueError: histories of different lengths, or a rudder that does not zig-zag
-        (fewer than two reversals).
+        (fewer than two reversals: a step to a turn looks like one).
     """
     t, psi, delta = (np.asarray(a, dtype=float) for a in (time, heading, rudder))
     if not t.shape == psi.shape == delta.shape or t.ndim != 1 or t.size < 3:
@@ -372,9 +372,9 @@ def read_zigzag(time: ArrayLike, heading: ArrayLike, rudder: ArrayLike) -> Zigza
     if amplitude <= 0 or sided.size == 0:
         raise ValueError("the rudder does not zig-zag: it holds one angle")
     changes = sided[1:][np.diff(side[sided]) != 0]  # first sample on a new side
-    if changes.size < 1:
-        raise ValueError("the rudder does not zig-zag: it never reverses (a turn, not a "
-                         "zig-zag?)")
+    if changes.size < 2:  # the first overshoot needs the second execute and the third
+        raise ValueError(f"the rudder does not zig-zag: it reverses {changes.size} time(s), "
+                         "fewer than twice (a turn, not a zig-zag?)")
     dt = float(np.median(np.diff(t)))
     rate = _rudder_rate(delta, centre, amplitude, dt)
     first = int(sided[0])
@@ -384,16 +384,16 @@ def read_zigzag(time: ArrayLike, heading: ArrayLike, rudder: ArrayLike) -> Zigza
     start = executes[0]
     change = np.unwrap(psi) - psi[start]
     first_direction = int(side[first])
-    s1 = float(np.sign(change[executes[1]])) if len(executes) > 1 else math.nan
+    s1 = float(np.sign(change[executes[1]]))
     switch = _switch(change, executes[1:])
-    ends = [*executes[2:4], None, None]
-    p1, i1 = _peak(change, executes[1], ends[0], s1) if len(executes) > 1 else (math.nan, -1)
-    p2, _ = _peak(change, executes[2], ends[1], -s1) if len(executes) > 2 else (math.nan, -1)
+    ends = [*executes[3:5], None, None]
+    p1, i1 = _peak(change, executes[1], executes[2], s1)
+    p2, _ = _peak(change, executes[2], ends[0], -s1)
     rel = t - t[start]
     return ZigzagCriteria(
         amplitude=float(amplitude), switch=switch, centre=float(centre),
         rudder_rate=None if rate * dt >= amplitude else rate, first_direction=first_direction,
-        turn_sign=int(s1 * first_direction) if math.isfinite(s1) else 1, start=start,
+        turn_sign=int(s1 * first_direction), start=start,
         reversal_times=rel[executes[1:]], initial_turning_time=float(rel[executes[1]]),
         first_overshoot=p1 - switch, second_overshoot=p2 - switch,
         first_peak_time=float(rel[i1]) if i1 >= 0 else math.nan)

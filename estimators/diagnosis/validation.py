@@ -255,17 +255,15 @@ def _read(host: Host, source: Recording | str | Path, rerun: str | None) -> Reco
         rec, name = read_recording(source, model=host.name), Path(source).name
     rec = rec.filled() if rec.missing.any() else rec
     model = host.models[MODELS[0]]
+    rudder, heading = _names(model, rec, name, rerun) if rerun else ("", "")
     if not _angle_channels(model, rec):
         raise ValueError(f"{name}: no angle channel (rad) of model {host.name!r} is measured: "
                          "nothing to compare")
     if rerun is None:
         return RecordCheck(name, rec, None)
-    rudder, heading = _names(model, rec, name, rerun)
     args = (rec.time, rec.data[heading].to_numpy(), rec.data[rudder].to_numpy())
     try:
         criteria = read_zigzag(*args) if rerun == "zigzag" else read_turn(*args)
-        if rerun == "zigzag" and len(criteria.reversal_times) < 2:
-            raise ValueError("fewer than two rudder reversals")
     except ValueError as error:
         raise ValueError(f"{name}: cannot be re-run as a {rerun}: {error}") from None
     return RecordCheck(name, rec, criteria)
