@@ -1,7 +1,8 @@
 """A diagnosis checked on other tests (``marine validate``): does the corrected model predict
 records it was not fitted on better than the nominal-calibrated one?
 
-From a diagnosis JSON (:meth:`.result.Diagnosis.to_dict`) two models are rebuilt (:func:`read_host`):
+From a diagnosis JSON (:meth:`.result.Diagnosis.to_dict`) two models are rebuilt
+(:func:`read_host`):
 
 * **nominal-calibrated**: the host model with the nominal parameters the diagnosis started from
   (``params``) and the calibrated values (``calibration``), without the findings;
@@ -35,11 +36,24 @@ from typing import Any
 
 import numpy as np
 
-from marine_envs.manoeuvres import (HEADING_NAMES, RUDDER_NAMES, TurnCriteria, ZigzagCriteria,
-                                    ZigzagRudder, read_turn, read_zigzag, wrap_angle)
+from marine_envs.manoeuvres import (
+    HEADING_NAMES,
+    RUDDER_NAMES,
+    TurnCriteria,
+    ZigzagCriteria,
+    ZigzagRudder,
+    read_turn,
+    read_zigzag,
+    wrap_angle,
+)
 from marine_envs.models import VehicleModel, get_model
-from marine_envs.models.effects import (BatchActuators, Effect, ModelWithEffects,
-                                        applied_inputs, read_effects)
+from marine_envs.models.effects import (
+    BatchActuators,
+    Effect,
+    ModelWithEffects,
+    applied_inputs,
+    read_effects,
+)
 from marine_envs.models.integrate import rk4
 from marine_envs.recording import Recording, read_recording
 
