@@ -19,6 +19,10 @@ Definitions used for the zig-zag metrics (times from the first execute, t = 0):
   at the first peak time; time to check yaw = first peak time - initial turning time;
 * period: time of one full cycle, from the second to the fourth execute.
 
+:func:`read_zigzag` reads the same criteria (and A, B, the first direction, the rudder rate) off a
+measured heading and rudder history, a record or a prediction alike; :func:`read_turn` a turn's
+steady rudder and turning rate.
+
 Turning circle: the rudder is held at ``delta`` from steady straight running. Steady values are
 those at the end of the run: yaw rate r, drift angle ``beta = atan2(-v, u)`` (positive when the
 velocity points out of a starboard turn, the beta of docs/models.md 5.2), speed
