@@ -39,7 +39,9 @@ def record(a: float, b: float, seed: int, dt: float = 0.2, duration: float = 120
     data = pd.DataFrame({"time": z.time, "delta": z.rudder,
                          "r": z.states[:, 0] + 0.1 * noise * rng.standard_normal(len(z.time)),
                          "psi": z.states[:, 1] + noise * rng.standard_normal(len(z.time))})
-    return Recording(data, model="nomoto", meta={"name": f"zigzag_{a:g}_{b:g}"})
+    # the rudder limit stated as a nominal parameter: the diagnosis JSON must carry it
+    return Recording(data, model="nomoto", params={"delta_max": math.radians(40)},
+                     meta={"name": f"zigzag_{a:g}_{b:g}"})
 
 
 def fitted(seeds: tuple[int, int]) -> dict:
@@ -67,6 +69,8 @@ def rms(result, model: str, mode: str) -> float:
 def test_the_diagnosis_rebuilds_both_models(diagnosis):
     host = read_host(diagnosis)
     nominal, corrected = (host.models[m] for m in MODELS)
+    assert diagnosis["params"] == {"delta_max": pytest.approx(math.radians(40))}
+    assert nominal.params.delta_max == corrected.nominal.params.delta_max == math.radians(40)
     assert nominal.params.K == pytest.approx(diagnosis["calibration"]["K"])
     assert corrected.effects and corrected.effects[0].target == "r"
     refitted = diagnosis["calibration_quality"]["with_findings"]["T"]["value"]

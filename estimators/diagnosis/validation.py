@@ -453,7 +453,7 @@ def _manoeuvre(c: ZigzagCriteria | TurnCriteria | None) -> str:
             f"at {math.degrees(c.rudder_rate):.2g} deg/s"
         return (f"zig-zag {math.degrees(c.amplitude):.3g}/{math.degrees(c.switch):.3g} deg, "
                 f"rudder {'positive' if c.first_direction > 0 else 'negative'} first, moved "
-                f"{rate}, centred on {math.degrees(c.centre):.2g} deg")
+                f"{rate}, centred on {math.degrees(c.centre):.2f} deg")
     if isinstance(c, TurnCriteria):
         return f"turn at a steady rudder of {math.degrees(c.rudder):.3g} deg"
     return "replayed"
