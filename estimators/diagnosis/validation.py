@@ -356,7 +356,9 @@ def _rerun(host: Host, name: str, check: RecordCheck, rerun: str) -> Prediction:
     if isinstance(c, ZigzagCriteria):
         law = ZigzagRudder(c.amplitude, c.switch, first_direction=c.first_direction,
                            turn_sign=c.turn_sign, rudder_rate=c.rudder_rate)
-        law.reset(initial_heading=x[i_psi], initial_rudder=recorded[start] - c.centre)
+        # the rudder before the first execute (the sample at it has already moved)
+        before = recorded[start - 1] - c.centre if start else 0.0
+        law.reset(initial_heading=x[i_psi], initial_rudder=before)
         command = lambda k, z: c.centre + float(law(z[None, i_psi], rec.dt)[0])  # noqa: E731
     else:  # the recorded rudder until it has gone half way to the steady rudder, then held
         moved = np.abs(recorded - recorded[0]) >= 0.5 * abs(c.rudder - recorded[0])
