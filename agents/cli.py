@@ -545,11 +545,14 @@ def _validate(args: argparse.Namespace) -> int:
     out = _output_file(args.json, args.force, "--json")
     plot = _plot_path(args.plot, args.force)
     _distinct(("--json", out), ("--plot", plot))
-    with _bar(1, "predicting", not args.quiet) as bar:
-        def progress(done: int, total: int) -> None:
-            if bar is not None:
-                bar.total = total
-                bar.update(done - bar.n)
+    with contextlib.ExitStack() as stack:
+        bars: list[Any] = []
+
+        def progress(done: int, total: int) -> None:  # the bar once the inputs are checked
+            if not bars:
+                bars.append(stack.enter_context(_bar(total, "predicting", not args.quiet)))
+            if bars[0] is not None:
+                bars[0].update(done - bars[0].n)
 
         result = validate(args.diagnosis, args.recording, args.rerun, progress)
     print(result.table())

@@ -106,21 +106,22 @@ def read_host(document: Mapping[str, Any] | str | Path) -> Host:
         raise ValueError(f"{where}: not a diagnosis JSON (written by 'marine diagnose "
                          f"--json'): no {', '.join(repr(k) for k in missing)}")
     base = get_model(str(document["model"]))
-    nominal = {**document.get("params", {}), **document.get("calibration", {})}
-    refitted = {n: q["value"] for n, q in document.get("calibration_quality", {})
-                .get("with_findings", {}).items()}
     try:
+        nominal = {**document.get("params", {}), **document.get("calibration", {})}
+        refitted = {n: q["value"] for n, q in document.get("calibration_quality", {})
+                    .get("with_findings", {}).items()}
         effects = read_effects(document["findings"])
         calibrated = base.with_params(**nominal) if nominal else base
         final = calibrated.with_params(**refitted) if refitted else calibrated
         state = [e for e in effects if e.kind == "state"]
         corrected = ModelWithEffects(final, state) if state else final
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"{where}: {error}") from None
-    ranges = tuple((f"{f['effect']} on {f['target']}",
-                    {s: (float(lo), float(hi)) for s, (lo, hi) in f["fitted_range"].items()
-                     if s in base.state_names})
-                   for f in document["findings"] if f.get("fitted_range"))
+        ranges = tuple((f"{f['effect']} on {f['target']}",
+                        {s: (float(lo), float(hi)) for s, (lo, hi) in f["fitted_range"].items()
+                         if s in base.state_names})
+                       for f in document["findings"] if f.get("fitted_range"))
+    except (AttributeError, KeyError, TypeError, ValueError) as error:
+        raise ValueError(f"{where}: cannot rebuild its models: {type(error).__name__} "
+                         f"{error}") from None
     return Host(base.name, {MODELS[0]: calibrated, MODELS[1]: corrected},
                 tuple(e for e in effects if e.kind == "input"),
                 tuple(e for e in effects if e.kind == "output"), ranges)
@@ -168,8 +169,9 @@ class Validation:
             channels = list(check.predictions[0].rms) if check.predictions else []
             head = "".join(f"{c + ' RMS':>11}" for c in channels) + _criteria_head(self.rerun)
             lines.append(f"  {'':<38}{head}")
-            lines.append(f"  {'record':<38}{'':>{11 * len(channels)}}"
-                         f"{_criteria_cells(check.criteria)}")
+            if check.criteria is not None:
+                lines.append(f"  {'record':<38}{'':>{11 * len(channels)}}"
+                             f"{_criteria_cells(check.criteria)}")
             for p in check.predictions:
                 rms = "".join(f"{math.degrees(p.rms[c]):>7.2f} deg" for c in channels)
                 cells = _criteria_cells(p.criteria) if p.mode != "replayed" else ""
@@ -232,7 +234,8 @@ def validate(diagnosis: Mapping[str, Any] | str | Path,
     :param diagnosis: the diagnosis JSON or its path.
     :param recordings: records of the same model (paths or :class:`Recording`).
     :param rerun: also re-run each record as a ``"zigzag"`` or a ``"turn"``; None: replay only.
-    :param progress: called with (predictions done, their number).
+    :param progress: called with (predictions done, their number), first with 0 once the inputs
+        are checked.
     :raises ValueError: before any work: not a diagnosis, a record of another model, a record
         that does not show the manoeuvre (or lacks the rudder or heading it needs).
     """
@@ -243,6 +246,8 @@ def validate(diagnosis: Mapping[str, Any] | str | Path,
         raise ValueError("no recording given")
     checks = [_read(host, r, rerun) for r in recordings]
     total, done = len(checks) * len(MODELS) * (2 if rerun else 1), 0
+    if progress:
+        progress(0, total)
     for check in checks:
         for model in MODELS:
             check.predictions.append(_replayed(host, model, check))
