@@ -1,5 +1,5 @@
-"""The ``marine`` command line: demo, simulate, episode, reproduce, diagnose, train, evaluate,
-bench, envs.
+"""The ``marine`` command line: demo, simulate, episode, reproduce, diagnose, validate, train,
+evaluate, bench, envs.
 
 Every command checks what it is given (environment ids, numbers, input files, output paths and
 the extras their formats need) before any work, and reports a mistake as one line
@@ -539,6 +539,32 @@ def _print_diagnosis(diagnosis: Any) -> None:
                 print(f"  {channel['name']:<12}{channel['rmse']:>12.4g}")
 
 
+def _validate(args: argparse.Namespace) -> int:
+    from estimators.diagnosis.validation import validate
+
+    out = _output_file(args.json, args.force, "--json")
+    plot = _plot_path(args.plot, args.force)
+    _distinct(("--json", out), ("--plot", plot))
+    with contextlib.ExitStack() as stack:
+        bars: list[Any] = []
+
+        def progress(done: int, total: int) -> None:  # the bar once the inputs are checked
+            if not bars:
+                bars.append(stack.enter_context(_bar(total, "predicting", not args.quiet)))
+            if bars[0] is not None:
+                bars[0].update(done - bars[0].n)
+
+        result = validate(args.diagnosis, args.recording, args.rerun, progress)
+    print(result.table())
+    if out is not None:
+        _write_json(out, result.to_dict())
+        print(f"table written to {out}")
+    if plot is not None:
+        result.plot(plot)
+        print(f"plot written to {plot}")
+    return 0
+
+
 #: ``marine train`` options that --resume takes from the run's config.json instead.
 RESUME_TAKES = ("env_id", "algo", "estimator", "n_envs", "backend", "seed", "out", "config")
 
@@ -870,6 +896,32 @@ def build_parser() -> argparse.ArgumentParser:
                           "the vehicle's bandwidth); default 1")
     diagnose.add_argument("--quiet", action="store_true", help="no progress bar")
     diagnose.set_defaults(run=_diagnose)
+
+    validate = commands.add_parser(
+        "validate", help="check a diagnosis on other tests: predict records with its nominal "
+                         "and corrected models",
+        description="Predict each recording with the nominal-calibrated model of a diagnosis "
+                    "(its calibrated values, no findings) and its corrected model (with the "
+                    "findings): replayed (the recorded inputs, free simulation from the first "
+                    "measured state) and, with --rerun, re-run as the manoeuvre the record shows "
+                    "(a zig-zag with its rudder amplitude, heading check, first direction and "
+                    "rudder rate; a turn at its steady rudder). Prints per record and model the "
+                    "RMS error of every angle channel (deg) and the standard criteria of record "
+                    "and prediction (first and second overshoot, time to check yaw; turning "
+                    "rate), and says when a finding is used outside the range it was fitted on.")
+    validate.add_argument("diagnosis", help="the diagnosis JSON written by 'marine diagnose "
+                                            "--json'")
+    validate.add_argument("recording", nargs="+",
+                          help="recording file(s) of the diagnosis's model (.csv with its "
+                               ".json sidecar, or .parquet), best tests it was not fitted on")
+    validate.add_argument("--rerun", choices=("zigzag", "turn"),
+                          help="also re-run each record as this manoeuvre, closed loop")
+    validate.add_argument("--json", metavar="OUT", help="write the table as JSON")
+    validate.add_argument("--plot", metavar="PNG",
+                          help="write a figure: the heading of each record and the predictions")
+    validate.add_argument("--force", action="store_true", help="replace existing outputs")
+    validate.add_argument("--quiet", action="store_true", help="no progress bar")
+    validate.set_defaults(run=_validate)
 
     train = commands.add_parser(
         "train", help="train a Stable-Baselines3 agent (PPO, SAC, TD3, A2C) on an environment",

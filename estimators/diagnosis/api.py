@@ -161,6 +161,7 @@ def _diagnose(recordings: list[Recording], vehicle: VehicleModel | None,
         diagnosis.record = resized
     if isinstance(vehicle, MeasuredDisturbances):
         diagnosis.measured_disturbances = vehicle.measured_disturbances
+    diagnosis.params = overrides
     return actuators.merged(diagnosis, found)
 
 

@@ -63,6 +63,10 @@ class Diagnosis:
     unconfirmed: list[Finding] = field(default_factory=list)
     fit: dict[str, Any] = field(default_factory=dict)
     calibration: dict[str, float] = field(default_factory=dict)
+    #: the nominal parameter overrides the diagnosis started from (the first recording's
+    #: metadata and ``params``): with ``calibration``, what rebuilds its models (``marine
+    #: validate``)
+    params: dict[str, float] = field(default_factory=dict)
     model_check: dict[str, Any] = field(default_factory=dict)
     calibration_quality: dict[str, Any] = field(default_factory=dict)
     unexplained: dict[str, Any] = field(default_factory=dict)
@@ -98,6 +102,8 @@ class Diagnosis:
             out["reason"] = self.reason
         if self.calibration:
             out["calibration"] = self.calibration
+        if self.params:
+            out["params"] = self.params
         for key in ("calibration_quality", "model_check", "unexplained", "not_kept",
                     "alternatives"):
             if getattr(self, key):
