@@ -81,7 +81,7 @@ class Series:
     scale: FloatArray
     moving: BoolArray
     #: :meth:`excited`, once worked out (every fit asks for it, and a model without exact
-    #: matrices linearises by finite differences: 15 % of the hovercraft runs' diagnosis)
+    #: matrices linearises by finite differences: a quarter of the hovercraft runs' diagnosis)
     _excited: BoolArray | None = field(default=None, init=False, repr=False)
 
     @classmethod
