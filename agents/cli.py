@@ -473,7 +473,7 @@ def _diagnose(args: argparse.Namespace) -> int:
     spans = ", ".join(f"{rec.time[-1] - rec.time[0]:.0f} s" for rec in recordings)
     seconds = expected_seconds(recordings, args.method, bool(args.calibrate))
     say(f"{samples} samples ({spans}) of model {args.model or recordings[0].model}: " + (
-            "free simulation (seconds for a linear model, minutes for a nonlinear one)"
+            "free simulation (seconds; minutes where a recorded disturbance is an input)"
             if seconds is None else  # the rate varies with what the search finds
             f"expected run time {_duration(seconds)} to {_duration(3 * seconds)}")
         + ("" if seconds is None or seconds < 20 else

@@ -4,19 +4,22 @@ records whose truth is known; the real ones are in benchmarks/real_recordings.py
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from estimators.diagnosis import diagnose
+from estimators.diagnosis import diagnose, output_error
 from estimators.diagnosis.free_simulation_report import markdown
 from estimators.diagnosis.modes import decay_analysis, model_modes, nearest_mode
 from estimators.diagnosis.output_error import Coordinates, Series, Structure, basis
 from marine_envs.models import get_model
 from marine_envs.models.effects import Effect, EffectModel
 from marine_envs.models.integrate import rk4
-from marine_envs.recording import Recording
+from marine_envs.recording import Recording, read_recording
+
+REAL = Path(__file__).resolve().parents[1] / "marine_envs" / "data" / "real"
 
 
 def decay(effects=(), wn=1.0, zeta=0.02, phi0=0.3, duration=60.0, dt=0.1, noise=1e-4,
@@ -105,6 +108,36 @@ def test_batched_simulation_equals_one_simulation_per_parameter_set():
     batch = structure.simulate(theta, 0)
     for row, values in zip(batch, theta, strict=True):
         np.testing.assert_allclose(row, structure.simulate(values[None], 0)[0], rtol=1e-12)
+
+
+@pytest.mark.parametrize("vehicle, names, terms", [
+    ("usv", ("wn", "zeta"), (basis("quadratic_damping", "p"),
+                             basis("nonlinear_restoring", "p", source="phi"),
+                             basis("coupling", "p", source="phi"))),
+    ("nomoto", ("K", "T"), (basis("linear_damping", "r"),
+                            basis("nonlinear_damping", "r", form="cubic"),
+                            basis("current", "r"), basis("sensor_bias", "psi"))),
+    ("hovercraft", ("N_Hr",), (basis("quadratic_damping", "r"),))])
+def test_the_compiled_free_simulation_is_the_numpy_one(monkeypatch, vehicle, names, terms):
+    """Every term the compiled simulation knows, parameters per row (packed per row, or one
+    model per row where the model takes no parameter per row) and an input effect per row."""
+    if vehicle == "hovercraft":  # a shipped EPFL run (3 inputs, north/east/psi measured)
+        rec = read_recording(sorted(REAL.glob("hovercraft_epfl_2019-*.csv"))[0])
+        model = get_model(vehicle, **rec.params)
+    else:
+        rec = decay() if vehicle == "usv" else zigzag(20.0, duration=60.0)
+        model = get_model(vehicle)
+    series = Series.from_recordings([rec], model, names)
+    structure = Structure(series, names, terms)
+    theta = np.tile(structure.start(), (3, 1))
+    theta[:, 0] *= [0.8, 1.0, 1.2]
+    theta[:, len(names):len(names) + len(terms)] = [[0.0] * len(terms), [0.1] * len(terms),
+                                                    [-0.2] * len(terms)]
+    actuators = [[], [Effect("input_delay", model.input_names[0], {"tau": 0.3})], []]
+    compiled = structure.simulate(theta, 0, actuators=actuators)
+    monkeypatch.setattr(output_error, "_compiled_states", lambda *_args: None)
+    numpy = structure.simulate(theta, 0, actuators=actuators)
+    np.testing.assert_allclose(compiled, numpy, rtol=1e-10, atol=1e-12)
 
 
 # -- decays ---------------------------------------------------------------------------------------

@@ -111,7 +111,8 @@ def expected_seconds(recordings: Sequence[Recording], method: str = "auto",
     """A rough run time of :func:`diagnose`, s, from the records' length (as
     :func:`.sizing.plan` sizes them) and the model's measured rate (:data:`SEAWAY_SECONDS`; a
     calibration smooths twice more); None for free simulation (model tests), which resamples
-    to the model's bandwidth: seconds for a linear model, minutes for a nonlinear one."""
+    to the model's bandwidth: seconds on the model's compiled equations, minutes where a
+    recorded disturbance is one of its inputs (simulated by numpy)."""
     if method == "free" or (method == "auto" and _model_test(recordings)):
         return None
     fixed, per_sample = SEAWAY_SECONDS.get(recordings[0].model, DEFAULT_SECONDS)
