@@ -10,7 +10,7 @@ restoring as linear + cubic). Models are compared on held-out data in free simul
 * one recording: its last ``1 - fit_fraction``, predicted by continuing the simulation fitted on
   the rest (for a decay, the small amplitudes the fit did not see);
 * a series: each recording in turn, predicted by the model fitted on the others (only its own
-  initial state fitted to it).
+  initial state fitted to it; a recording cut into windows is held out whole).
 
 The best candidate whose coefficient is at least two standard deviations from zero is accepted
 when it removes at least ``min_gain`` of the held-out error in excess of the sensor noise; the
@@ -257,16 +257,18 @@ def held_out(structure: Structure, theta: FloatArray, config: ComparisonConfig) 
         errors = []
         per_state = len(structure.free_states)
         first = len(structure.names) + len(structure.terms)
-        for r, run in enumerate(series.runs):
-            own = np.arange(first + r * per_state, first + (r + 1) * per_state)
+        for fold in series.folds():  # a recording (or all the windows cut from it)
+            own = np.concatenate([np.arange(first + r * per_state, first + (r + 1) * per_state)
+                                  for r in fold])
             rows: list[BoolArray | None] = all_rows(series)
-            rows[r] = None
-            others = fit(structure, rows, theta, fixed=own).theta
             alone: list[BoolArray | None] = [None] * len(series.runs)
-            alone[r] = np.ones(len(run.time), dtype=bool)
+            for r in fold:
+                rows[r], alone[r] = None, np.ones(len(series.runs[r].time), dtype=bool)
+            others = fit(structure, rows, theta, fixed=own).theta
             rest = np.setdiff1d(np.arange(structure.size), own)
             fitted = fit(structure, alone, others, fixed=rest).theta
-            errors.append((structure.simulate(fitted, r)[0] - run.y) / series.scale)
+            errors += [(structure.simulate(fitted, r)[0] - series.runs[r].y) / series.scale
+                       for r in fold]
     diverged = any(not np.all(np.abs(e) <= 1e2) for e in errors)  # NaN too
     errors = [np.clip(np.nan_to_num(e, nan=1e2), -1e2, 1e2) for e in errors]
     per_run = [float(np.mean(e**2)) for e in errors]

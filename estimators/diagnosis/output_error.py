@@ -51,6 +51,8 @@ class Run:
     :param name: label (file name).  :param time: ``(T,)`` s from the record's start.
     :param u: commanded inputs ``(T, n_u)``, held between samples.  :param y: the measured
         channels ``(T, m)`` (angles unwrapped).  :param noise: their white-noise std.
+    :param record: the recording a window was cut from (its index in the series' recordings;
+        held-out scores leave a whole recording out), or None: the run is a recording.
     """
 
     name: str
@@ -58,6 +60,7 @@ class Run:
     u: FloatArray
     y: FloatArray
     noise: FloatArray
+    record: int | None = None
 
     @property
     def duration(self) -> float:
@@ -114,6 +117,15 @@ class Series:
         h = dt * factor
         substeps = max(1, math.ceil(_model_bandwidth(model, names) * h / 0.5))
         return cls(model, tuple(channels), runs, h, substeps, scale, moving)
+
+    def folds(self) -> list[list[int]]:
+        """The runs held out together: each recording's windows (:attr:`Run.record`), or each
+        run alone when they are whole recordings or cut from one."""
+        records = [r.record for r in self.runs]
+        if None in records or len(set(records)) < 2:
+            return [[k] for k in range(len(self.runs))]
+        return [[k for k, r in enumerate(records) if r == record]
+                for record in dict.fromkeys(records)]
 
     def excited(self) -> BoolArray:
         """Per state: moved by an input that moves or by a measured state (through the

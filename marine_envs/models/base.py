@@ -73,6 +73,9 @@ class VehicleModel(ABC):
     #: model: fits move them as ``K/T`` and ``1/T``, which stay finite where the lag turns
     #: unstable (``1/T`` through 0, ``T`` through infinity).
     lag_parameters: ClassVar[tuple[str, str] | None] = None
+    #: Parameters known only roughly (fitted, estimated), which a diagnosis may calibrate by
+    #: itself when free simulation cannot follow the records; empty: any parameter may be.
+    calibration_candidates: ClassVar[tuple[str, ...]] = ()
 
     @property
     def actuator_names(self) -> tuple[str, ...]:

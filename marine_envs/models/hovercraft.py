@@ -43,7 +43,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
-from typing import ClassVar
+from types import SimpleNamespace
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -162,11 +163,16 @@ class HovercraftParams:
     def resolved(self) -> HovercraftParams:
         """A copy with the derived defaults (``Iz``, ``X_ud``, ``Y_vd``, ``N_rd``, ``N_vd``) filled
         in as numbers (kg, kg m^2, kg m)."""
+        changes = self.derived()
+        return dataclasses.replace(self, **changes) if changes else self
+
+    def derived(self) -> dict[str, Any]:
+        """The derived defaults that are ``None``, as numbers (kg, kg m^2, kg m): numpy
+        arithmetic, so parameters held per batch row derive per row."""
         Iz = self.m * (self.L**2 + self.B**2) / 12.0 if self.Iz is None else self.Iz
         defaults = {"Iz": Iz, "X_ud": -0.02 * self.m, "Y_vd": -0.05 * self.m,
                     "N_rd": -0.05 * Iz, "N_vd": 0.0}
-        changes = {k: v for k, v in defaults.items() if getattr(self, k) is None}
-        return dataclasses.replace(self, **changes) if changes else self
+        return {k: v for k, v in defaults.items() if getattr(self, k) is None}
 
 
 #: Layout of the packed constants ``p`` of :func:`hovercraft_rhs`: three sets of the 13
@@ -247,6 +253,12 @@ class HovercraftModel(VehicleModel):
         f.name for f in dataclasses.fields(HovercraftParams)
         if f.name[:3] in ("X_A", "Y_A", "N_A", "X_H", "Y_H", "N_H") or f.name.startswith("C_R"))
     equations: ClassVar[Equations] = Equations(hovercraft_rhs)
+    #: :meth:`pack` is numpy arithmetic: a parameter may hold one value per batch row.
+    row_parameters: ClassVar[bool] = True
+    #: Thrust, drags, yaw inertia and damping: the coefficients no craft states on paper (the
+    #: EPFL runs' were fitted by equation error); mass, lever arm and size are weighed and
+    #: measured, and the scale ambiguities (T0 m, y_P Iz) leave them out.
+    calibration_candidates: ClassVar[tuple[str, ...]] = ("T0", "X_Hu", "Y_Hv", "Iz", "N_Hr")
 
     def __init__(self, params: HovercraftParams | None = None) -> None:
         super().__init__(HovercraftParams() if params is None else params)
@@ -254,7 +266,7 @@ class HovercraftModel(VehicleModel):
 
     def pack(self) -> FloatArray:
         """The constants of :func:`hovercraft_rhs`, derived once: it runs 8x per control step."""
-        k = self.params.resolved()
+        k = SimpleNamespace(**{**vars(self.params), **self.params.derived()})  # rows allowed
         hydro = (k.X_Hu, k.X_Huu, k.X_Hvv, k.X_Huv, k.Y_Hv, k.Y_Hvv, k.Y_Huv, k.N_Hv,
                  k.N_Hr + k.N_Ar, k.N_Hvvv, k.N_Hrrr + k.N_Arrr, k.N_Hvvr, k.N_Hvrr)
         # aerodynamic terms in (u_a, v_a, r); the r-only terms sit in `hydro` (r is the same)
@@ -267,9 +279,9 @@ class HovercraftModel(VehicleModel):
         inverse = (m33 / det, -m23 / det, -m32 / det, m22 / det)
         disc = k.k_s * 2.0 / (k.rho_a * math.pi * k.D_p**2 / 4.0)  # V_R^2 per N of Tbar
         rudder = k.n_R * k.S_R * 0.5 * k.rho_a  # force per (coefficient * V_R^2)
-        return np.array([*hydro, *aero, *both, 1.0 / (k.m - k.X_ud), *inverse, disc, rudder,
-                         k.T0, k.T0 / k.U_T, k.C_R1, k.C_R2, k.C_R3, k.C_R4, k.m, k.x_R, k.y_P,
-                         k.N_Hbeta])
+        packed = (*hydro, *aero, *both, 1.0 / (k.m - k.X_ud), *inverse, disc, rudder, k.T0,
+                  k.T0 / k.U_T, k.C_R1, k.C_R2, k.C_R3, k.C_R4, k.m, k.x_R, k.y_P, k.N_Hbeta)
+        return np.stack(np.broadcast_arrays(*packed), axis=-1).astype(float)
 
     # -- nominal operating point -------------------------------------------------------------
     @property
