@@ -150,7 +150,9 @@ def read_hsva_zigzag(path: str | Path) -> Recording:
     """An HSVA zigzag ``.dat`` (4 latin-1 header lines, 12 columns at 20 Hz: time s, x, y m,
     psi deg, dx/dt, dy/dt m/s, r deg/s, roll deg, rudder deg, rpm, thrust, torque) as a
     ``nomoto`` recording: input ``delta`` (rad, positive to port), measured ``r`` (rad/s) and
-    ``psi`` (rad, unwrapped, relative to the first sample); time from 0."""
+    ``psi`` (rad, unwrapped, relative to the first sample); time from 0. The rudder column is
+    the rudder angle itself, not a command: ``meta["measured_inputs"]`` says so (a delay on
+    it is no actuator delay)."""
     path = Path(path)
     table = np.loadtxt(path, skiprows=4, encoding="latin-1")
     if table.ndim != 2 or table.shape[1] != 12:
@@ -159,7 +161,7 @@ def read_hsva_zigzag(path: str | Path) -> Recording:
     time_ = np.round(table[:, 0] - table[0, 0], 9)
     return Recording.from_arrays("nomoto", time_, np.radians(table[:, 8]),
                                  {"r": np.radians(table[:, 6]), "psi": psi - psi[0]},
-                                 meta={"name": path.name})
+                                 meta={"name": path.name, "measured_inputs": ["delta"]})
 
 
 # -- reference fits -------------------------------------------------------------------------------

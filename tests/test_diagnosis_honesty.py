@@ -62,8 +62,9 @@ def test_a_rudder_offset_is_named_as_the_models_delta0_with_the_range_it_was_fit
     named = diagnosis.to_dict()["findings"][0]["named_as"]  # ... named as what it is
     assert named["as"] == "rudder offset" and named["parameter"] == "delta0"
     assert math.degrees(named["value"]) == pytest.approx(-0.5, abs=0.05)
-    assert "rudder offset of -0.5 deg" in finding.explanation
-    assert "current" not in finding.explanation.split(", not a current")[0]
+    assert "rudder offset of -0.5 ± " in finding.explanation
+    assert "not a current" in finding.explanation
+    assert not finding.explanation.startswith("a steady force or current")
     # the range: the yaw rate the term acted on, as the fitted model simulated the record
     low, high = diagnosis.to_dict()["findings"][0]["fitted_range"]["r"]
     r = record.measurements[:, record.measured_names.index("r")]

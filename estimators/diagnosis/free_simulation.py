@@ -303,22 +303,23 @@ def _name_offset(finding: Finding, final: Fit) -> None:
     if offset is None:
         return
     unit = model.input_units[model.input_names.index(offset.input)] if offset.input else ""
-    word = INPUT_WORDS.get(offset.input or "", offset.input or offset.parameter)
     factor, shown = (180 / math.pi, "deg") if unit == "rad" else (1.0, unit)
-    i = model.state_names.index(finding.target)
-    unit_rate = model.state_units[i]
+    value = f"{offset.value * factor:+.2g} ± {offset.std * factor:.2g} {shown}".rstrip()
+    nominal = f"{float(getattr(model.params, offset.parameter)) * factor:g} {shown}".rstrip()
+    unit_rate = model.state_units[model.state_names.index(finding.target)]
     rate = f"{finding.parameters['b']:+.3g} " + (f"{unit_rate}²" if unit_rate.endswith("/s")
                                                  else f"{unit_rate}/s")
-    finding.named_as = {"as": f"{word} offset", "parameter": offset.parameter,
+    word = INPUT_WORDS.get(offset.input, offset.input) if offset.input else ""
+    name = f"{word} offset" if word else f"{offset.parameter} offset"
+    finding.named_as = {"as": name, "parameter": offset.parameter,
                         "value": offset.value, "std": offset.std, "unit": unit}
+    check = f", and check the {word}'s zero (it may differ between runs)" if word else ""
     finding.explanation = (
-        f"a {word} offset of {offset.value * factor:+.2g} {shown} (± {offset.std * factor:.2g};"
-        f" the model's own {offset.parameter}, left at "
-        f"{float(getattr(model.params, offset.parameter)) * factor:g} {shown}), not a current: "
-        f"the constant {rate} in {finding.target}'s equation is exactly what that offset adds; "
-        f"calibrate {offset.parameter} with the other parameters, and check the {word}'s zero "
-        "(it may differ between runs); it removes "
-        f"{finding.improvement:.0%} of the held-out free-simulation error beyond sensor noise.")
+        f"a {name} of {value} (the model's own {offset.parameter}, left at {nominal}), not a "
+        f"current: the constant {rate} in {finding.target}'s equation is exactly what that "
+        f"offset adds; calibrate {offset.parameter} with the other parameters{check}; it "
+        f"removes {finding.improvement:.0%} of the held-out free-simulation error beyond "
+        "sensor noise.")
 
 
 def _name_standing_in(finding: Finding, final: Fit) -> None:

@@ -244,7 +244,7 @@ def fitted_ranges(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
     if not rows:
         return []
     return ["Each finding holds over the range it was fitted on (the fitted model's free "
-            "simulation of the records); outside it, it is an extrapolation:", "", *rows, ""]
+            "simulation of the records); outside it, it is an extrapolation:", "", *rows]
 
 
 def non_physical(diagnosis: Diagnosis) -> list[str]:

@@ -74,7 +74,7 @@ def state_histories(fit: Fit) -> list[FloatArray]:
     return [wide.simulate(fit.theta, r)[0][:, columns] for r in range(len(series.runs))]
 
 
-def involved(term: Effect, model: VehicleModel) -> tuple[str, ...]:
+def involved(term: Effect) -> tuple[str, ...]:
     """The states (or input, or channel) a term acts on: its target and its source."""
     source = term.parameters.get("source")
     return (term.target,) + ((str(source),) if isinstance(source, str) else ())
@@ -88,7 +88,7 @@ def fitted_range(fit: Fit, term: Effect,
     sensor bias's channel as measured."""
     series, model = fit.structure.series, fit.structure.series.model
     out: dict[str, list[float]] = {}
-    for name in involved(term, model):
+    for name in involved(term):
         if term.kind == "input":
             j = model.input_names.index(name)
             values = np.concatenate([r.u[:, j] for r in series.runs])
@@ -259,7 +259,7 @@ def equivalent_offset(model: VehicleModel, term: Effect, b: float, b_std: float,
     when the model has none (a current is then a current)."""
     if term.effect != "current" or term.target not in model.state_names:
         return None
-    model = model.with_params(**(values or {})) if values else model
+    model = model.with_params(**values) if values else model
     i = model.state_names.index(term.target)
     rng = np.random.default_rng(0)  # probe points: the offset must not depend on them
     x = rng.normal(size=(4, len(model.state_names))) * 0.1
