@@ -39,6 +39,9 @@ BoolArray = NDArray[np.bool_]
 #: held out): a truth whose damping falls by 0.8 r|r| (0.56 |B1| at the largest r) is refused
 #: on both; 0.4 r|r| (0.28 |B1|) is kept, with the report's note on its negative B2; the
 #: physical -0.8 r|r| (seeds 7-8) and -3 r|r| (10/20/35, seeds 9-11) are found, never refused.
+#: The shipped KVLCC2 roll decay's wrong-sign quadratic (accepted before: B2 = -0.08 beside
+#: B1 = 0.025, B3 = 0.39) removes 2.9 |B1| at |p| = 0.445 rad/s: refused; no HSVA zigzag
+#: (alone or as a series) has a destabilising candidate.
 MAX_DESTABILISING = 0.5
 #: How every reason of :func:`nonphysical` begins.
 NONPHYSICAL = "non-physical"
