@@ -26,7 +26,8 @@ def read_hsva_zigzag(path: str | Path, model: str = "nomoto") -> Recording:
 
     Both models: input ``delta`` (rad, positive to port, as recorded: it gives a negative r),
     measured ``r`` (rad/s) and ``psi`` (rad, unwrapped, relative to the first sample); time from
-    0. ``mmg`` adds the input ``n_p`` (rev/s, column 10) and the measured body velocities ``u``,
+    0. The rudder column is the rudder angle itself, not a command: ``meta["measured_inputs"]``
+    says so (a delay the diagnosis finds on it is no actuator delay). ``mmg`` adds the input ``n_p`` (rev/s, column 10) and the measured body velocities ``u``,
     ``v`` (m/s): the recorded velocities are EARTH-fixed, so they are rotated into the body
     axes by the recorded (absolute) heading, ``u = x_dot cos psi + y_dot sin psi``,
     ``v = -x_dot sin psi + y_dot cos psi`` (at the point the carriage tracks, taken as midship).
@@ -47,9 +48,10 @@ def read_hsva_zigzag(path: str | Path, model: str = "nomoto") -> Recording:
     time = np.round(col["time"] - col["time"][0], 9)
     delta = np.radians(col["delta"])
     measured = {"r": np.radians(col["r"]), "psi": heading - heading[0]}
+    meta = {"name": path.name, "measured_inputs": ["delta"] + (["n_p"] if model == "mmg" else [])}
     if model == "nomoto":
-        return Recording.from_arrays("nomoto", time, delta, measured, meta={"name": path.name})
+        return Recording.from_arrays("nomoto", time, delta, measured, meta=meta)
     c, s = np.cos(heading), np.sin(heading)
     body = {"u": col["x_dot"] * c + col["y_dot"] * s, "v": -col["x_dot"] * s + col["y_dot"] * c}
     return Recording.from_arrays("mmg", time, np.column_stack([delta, col["n_p"]]),
-                                 {**body, **measured}, meta={"name": path.name})
+                                 {**body, **measured}, meta=meta)

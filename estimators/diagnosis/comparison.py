@@ -33,6 +33,7 @@ from marine_envs.models.effects import Effect
 
 from .hypotheses import rate_limit_grid
 from .output_error import Fit, Series, Structure, basis, fit, jacobian, term_label
+from .ranges import nonphysical
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -142,12 +143,16 @@ class Comparison:
 
     def refusal(self, scored: Scored, before: HeldOut) -> str | None:
         """Why ``scored`` is not accepted over a model whose held-out error is ``before``
-        (None: it is acceptable): it diverges, its coefficient is not significant, or it
-        removes less than ``min_gain`` of the held-out error in excess of the noise."""
+        (None: it is acceptable): it diverges, its coefficient is not significant, its sign
+        makes the motion less stable than the linear model (:func:`.ranges.nonphysical`), or
+        it removes less than ``min_gain`` of the held-out error in excess of the noise."""
         if scored.held_out.diverged:
             return "its free simulation diverges on the held-out data"
         if not _significant(scored):
             return _insignificant(scored)
+        unstable = nonphysical(scored.fit, scored.candidate.term)
+        if unstable:
+            return unstable
         gain = self.improvement(before, scored.held_out)
         if before.mean_square - scored.held_out.mean_square < self.config.min_gain * max(
                 before.mean_square - self.noise_floor, 0.0):

@@ -34,6 +34,13 @@ from .comparison import MAX_CORRELATION, Comparison, ComparisonConfig, HeldOut, 
 from .explain import describe, separating_test
 from .modes import check_modes, free_decays, mode_start
 from .output_error import Fit, Run, Series, Structure, fit, jacobian, term_label
+from .ranges import (
+    NONPHYSICAL,
+    equivalent_offset,
+    fitted_range,
+    standard_form,
+    state_histories,
+)
 from .result import Diagnosis, Finding
 
 BoolArray = NDArray[np.bool_]
@@ -98,7 +105,8 @@ def diagnose_series(recordings: Sequence[Recording], vehicle: VehicleModel,
             refusal.calibration = _values(comparison.nominal, calibrate)
             refusal.calibration_quality = calibration_quality(comparison.nominal, calibrate)
         return refusal
-    return _diagnosis(comparison, calibrate, check)
+    return with_honest_names(_diagnosis(comparison, calibrate, check),
+                             measured_inputs(recordings, vehicle))
 
 
 def _too_little(series: Series, calibrate: Sequence[str]) -> str:
@@ -422,34 +430,6 @@ def _finding(scored: Scored, comparison: Comparison, share: float) -> Finding:
     return finding
 
 
-def standard_form(fit: Fit, target: str) -> dict[str, float]:
-    """The fitted equation of ``target`` in its field's coefficients: ``target' = -B1 x - B2
-    x|x| - B3 x^3 - C1 q - C3 q^3 + G_u u + ...`` (x the target, q its restoring source, u each
-    input that moves in the records), per unit inertia, at the fitted parameters (B: damping,
-    C: restoring, G: input gain; Nomoto's ``T r' + r = K delta`` has B1 = 1/T, G = K/T, which
-    stay defined when a nonlinear damping takes over B1 and K, T do not)."""
-    structure, values = fit.structure, fit.values()
-    model = structure.series.model
-    model = model.with_params(**{n: values[n] for n in structure.names})
-    A, B, _ = model.linearize()
-    i = model.state_names.index(target)
-    form = {"B1": -float(A[i, i])}
-    for term in structure.terms:
-        if term.target != target:
-            continue
-        c = values[term_label(term)]
-        key = {"linear_damping": "B1", "quadratic_damping": "B2", "nonlinear_damping": "B3",
-               "coupling": "C1", "nonlinear_restoring": "C3"}.get(term.effect)
-        if key:
-            form[key] = form.get(key, 0.0) - c
-        source = term.parameters.get("source")
-        if source and "C1" not in form:
-            form["C1"] = -float(A[i, model.state_names.index(source)])
-    form |= {f"G_{u}": float(B[i, j]) for j, u in enumerate(model.input_names)
-             if structure.series.moving[j] and B[i, j] != 0}
-    return {k: float(f"{v:.6g}") for k, v in form.items()}
-
-
 def _equal(comparison: Comparison, a: Scored, b: Scored) -> bool:
     """Held-out errors within the configured tie of each other."""
     best = min(a.held_out.mean_square, b.held_out.mean_square)
@@ -502,3 +482,109 @@ def _unexplained(comparison: Comparison) -> dict[str, Any]:
     return {c: {"rmse": rmse[c], "unit": units[c],
                 "share_of_signal": round(rmse[c] / float(series.scale[j]), 4)}
             for j, c in enumerate(series.channels)}
+
+
+# -- what the findings may claim: ranges, signs, offsets, measured inputs --------------------------
+#: An input in words, where the model's name for it is a symbol.
+INPUT_WORDS = {"delta": "rudder"}
+
+
+def measured_inputs(recordings: Sequence[Recording], model: VehicleModel) -> tuple[str, ...]:
+    """The model inputs every record measured rather than commanded: an actuator position
+    sensor (``<input>_applied``, which then drives the model) or the recording's
+    ``meta["measured_inputs"]`` (a log of the rudder angle itself, as HSVA's zigzags)."""
+    return tuple(name for name in model.input_names
+                 if all(name in r.actuator_names or name in r.meta.get("measured_inputs", ())
+                        for r in recordings))
+
+
+def with_honest_names(diagnosis: Diagnosis, measured: Sequence[str] = ()) -> Diagnosis:
+    """``diagnosis`` with each finding's fitted range, a constant force the model's offset
+    parameter explains named as that offset, an actuator effect on a measured input named as
+    standing in for missing dynamics, and the candidates refused as non-physical."""
+    comparison: Comparison | None = diagnosis.comparison
+    if comparison is None:
+        return diagnosis
+    final = comparison.final
+    states = state_histories(final) if comparison.accepted else []
+    for finding, scored in zip(diagnosis.findings, comparison.accepted, strict=True):
+        term = scored.candidate.term
+        finding.fitted_range = fitted_range(final, term, states)
+        if term.effect == "current":
+            _name_offset(finding, final)
+        elif term.kind == "input" and term.target in measured:
+            _name_standing_in(finding, final)
+    diagnosis.non_physical = _non_physical(comparison)
+    return diagnosis
+
+
+def _name_offset(finding: Finding, final: Fit) -> None:
+    """A constant force that an offset parameter of the model explains exactly, named as it
+    (with the parameter's value) instead of a current."""
+    model = final.structure.series.model
+    values = final.values()
+    offset = equivalent_offset(model, finding.as_effect(), float(finding.parameters["b"]),
+                               float(finding.std.get("b", math.nan)),
+                               {n: values[n] for n in final.structure.names})
+    if offset is None:
+        return
+    unit = model.input_units[model.input_names.index(offset.input)] if offset.input else ""
+    factor, shown = (180 / math.pi, "deg") if unit == "rad" else (1.0, unit)
+    value = f"{offset.value * factor:+.2g} ± {offset.std * factor:.2g} {shown}".rstrip()
+    nominal = f"{float(getattr(model.params, offset.parameter)) * factor:g} {shown}".rstrip()
+    unit_rate = model.state_units[model.state_names.index(finding.target)]
+    rate = f"{finding.parameters['b']:+.3g} " + (f"{unit_rate}²" if unit_rate.endswith("/s")
+                                                 else f"{unit_rate}/s")
+    word = INPUT_WORDS.get(offset.input, offset.input) if offset.input else ""
+    name = f"{word} offset" if word else f"{offset.parameter} offset"
+    finding.named_as = {"as": name, "parameter": offset.parameter,
+                        "value": offset.value, "std": offset.std, "unit": unit}
+    check = f", and check the {word}'s zero (it may differ between runs)" if word else ""
+    finding.explanation = (
+        f"a {name} of {value} (the model's own {offset.parameter}, left at {nominal}), not a "
+        f"current: the constant {rate} in {finding.target}'s equation is exactly what that "
+        f"offset adds; calibrate {offset.parameter} with the other parameters{check}; it "
+        f"removes {finding.improvement:.0%} of the held-out free-simulation error beyond "
+        "sensor noise.")
+
+
+def _name_standing_in(finding: Finding, final: Fit) -> None:
+    """An actuator effect on a measured input: the measured input cannot lag, rate-limit or
+    saturate behind itself, so the effect stands in for dynamics the host model lacks."""
+    model = final.structure.series.model
+    name, p = finding.target, finding.parameters
+    word = INPUT_WORDS.get(name, name)
+    what = {"input_delay": f"a {p.get('tau', 0):.2g}-s {word} delay",
+            "input_rate_limit": f"a {word} rate limit of {p.get('rate', 0):.3g} per second",
+            "input_saturation": f"a {word} saturation at ±{p.get('limit', 0):.3g}"}.get(
+        finding.effect, f"{finding.effect} on {name}")
+    j = model.input_names.index(name)
+    driven = [s for i, s in enumerate(model.state_names) if model.linearize()[1][i, j] != 0]
+    finding.named_as = {"as": "missing dynamics", "input": name, "measured": True}
+    finding.explanation = (
+        f"{what}: the {word} is measured and cannot {_verb(finding.effect)} itself; this stands "
+        f"in for dynamics between {name} and {', '.join(driven) or 'the motion'} that the host "
+        f"model `{model.name}` lacks (a second-order or richer model), not an actuator effect; "
+        f"it removes {finding.improvement:.0%} of the held-out free-simulation error beyond "
+        "sensor noise.")
+
+
+def _verb(effect: str) -> str:
+    return {"input_delay": "lag", "input_rate_limit": "be slower than",
+            "input_saturation": "be clipped against"}.get(effect, "differ from")
+
+
+def _non_physical(comparison: Comparison) -> list[dict[str, Any]]:
+    """Per round, the candidates refused because their sign makes the motion less stable than
+    the linear model over the recorded range, with the reason and their held-out share."""
+    out = []
+    befores = [comparison.nominal_held_out] + [s.held_out for s in comparison.accepted]
+    for k, round_ in enumerate(comparison.rounds):
+        for scored in round_:
+            reason = comparison.refusal(scored, befores[k]) or ""
+            if reason.startswith(NONPHYSICAL):
+                share = comparison.improvement(befores[k], scored.held_out)
+                out.append({"candidate": scored.candidate.label, "round": k + 1,
+                            "reason": reason,
+                            "improvement": "diverged" if share is None else round(share, 4)})
+    return out

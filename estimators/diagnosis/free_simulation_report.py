@@ -20,6 +20,7 @@ from .free_simulation import standard_form
 from .free_simulation_figures import channel_units, display_unit, with_degrees
 from .modes import MODE_TOLERANCE, free_decays, model_modes
 from .output_error import Fit
+from .ranges import span
 from .report_format import cell, change, num, parameters
 from .result import Diagnosis, Finding
 
@@ -205,7 +206,7 @@ def _findings(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
     out = ["## Findings", ""]
     if not diagnosis.findings:
         return out + ["None: no catalogue term removed enough of the held-out free-simulation "
-                      "error.", ""]
+                      "error.", "", *non_physical(diagnosis)]
     out += ["Terms accepted one at a time, each refitted together with the calibrated "
             "parameters and the terms before it; a row's parameters and standard form are "
             "those of the model at the round its term was accepted.", "",
@@ -214,9 +215,11 @@ def _findings(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
             "| ---: | --- | --- | --- | --- | ---: | ---: | --- |"]
     for k, f in enumerate(diagnosis.findings, 1):
         form = ", ".join(f"{key} = {num(value)}" for key, value in f.standard_form.items())
-        out.append(f"| {k} | {f.effect} | {f.target} | {cell(parameters(f))} | {form} | "
+        effect = f.effect + (f" ({f.named_as['as']})" if f.named_as else "")
+        out.append(f"| {k} | {effect} | {f.target} | {cell(parameters(f))} | {form} | "
                    f"{f.confidence:.2f} | {_percent(f.improvement)} | "
                    f"{cell(f.explanation)} |")
+    out += ["", *fitted_ranges(diagnosis, comparison)]
     out += ["", "Final model, all terms refitted together on all data (per unit inertia):", ""]
     notes = []
     for target in dict.fromkeys(f.target for f in diagnosis.findings):
@@ -225,7 +228,34 @@ def _findings(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
             out.append(f"    {equation}")
             notes += _sign_notes(comparison.final, target)
     out += ["", *_final_values(comparison.final), *notes]
-    return out
+    return out + non_physical(diagnosis)
+
+
+def fitted_ranges(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:
+    """Per finding, the range of the states (or input) it was fitted over, in display units:
+    outside it the finding is an extrapolation."""
+    model = comparison.series.model
+    units = dict(zip(model.state_names, model.state_units, strict=True)) | dict(
+        zip(model.input_names, model.input_units, strict=True))
+    rows = [f"- {k}. `{f.effect}` on `{f.target}`: " + ", ".join(
+        f"{name} in {span(low, high, units.get(name, ''))}"
+        for name, (low, high) in f.fitted_range.items())
+        for k, f in enumerate(diagnosis.findings, 1) if f.fitted_range]
+    if not rows:
+        return []
+    return ["Each finding holds over the range it was fitted on (the fitted model's free "
+            "simulation of the records); outside it, it is an extrapolation:", "", *rows]
+
+
+def non_physical(diagnosis: Diagnosis) -> list[str]:
+    """The candidates refused because their sign makes the motion less stable than the
+    linear model over the recorded range."""
+    if not diagnosis.non_physical:
+        return []
+    return ["Refused as non-physical (the next admissible candidate was taken instead):", "",
+            *(f"- round {t['round']}: `{t['candidate']}` (held-out improvement "
+              f"{_percent(t['improvement'])}): {t['reason']}." for t in diagnosis.non_physical),
+            ""]
 
 
 def _sign_notes(final: Fit, target: str) -> list[str]:

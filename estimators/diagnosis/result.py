@@ -29,6 +29,10 @@ class Finding:
     :param improvement: held-out share of the excess prediction error this term removes alone.
     :param explanation: what it means, in words.
     :param withdrawn: why it is not confirmed (the ``unconfirmed`` entries), or ``""``.
+    :param fitted_range: ``{name: [low, high]}`` (model units) of the states its term acts on,
+        or of an input effect's input, over the records it was fitted on (free simulation).
+    :param named_as: what it really is when its catalogue name would mislead (a constant force
+        an offset parameter of the model explains; an actuator effect on a measured input).
     """
 
     effect: str
@@ -40,6 +44,8 @@ class Finding:
     explanation: str
     standard_form: dict[str, float] = field(default_factory=dict)
     withdrawn: str = ""
+    fitted_range: dict[str, list[float]] = field(default_factory=dict)
+    named_as: dict[str, Any] = field(default_factory=dict)
 
     def as_effect(self) -> Effect:
         return Effect(self.effect, self.target, self.parameters)
@@ -73,6 +79,8 @@ class Diagnosis:
     alternatives: list[dict[str, Any]] = field(default_factory=list)
     #: with ``unexplained``: the candidates of the search's last round and why none was kept
     not_kept: list[dict[str, Any]] = field(default_factory=list)
+    #: candidates refused because their sign makes the motion less stable (free simulation)
+    non_physical: list[dict[str, Any]] = field(default_factory=list)
     #: recorded disturbances the model took as known inputs (a logged wind, current, command)
     measured_disturbances: tuple[str, ...] = ()
     #: the recordings' implausible values (unit mistakes?), one line each
@@ -105,7 +113,7 @@ class Diagnosis:
         if self.params:
             out["params"] = self.params
         for key in ("calibration_quality", "model_check", "unexplained", "not_kept",
-                    "alternatives"):
+                    "alternatives", "non_physical"):
             if getattr(self, key):
                 out[key] = getattr(self, key)
         if self.measured_disturbances:
@@ -216,6 +224,9 @@ def _finding_dict(f: Finding) -> dict[str, Any]:
         out["standard_form"] = f.standard_form
     if f.withdrawn:
         out["withdrawn"] = f.withdrawn
+    for key in ("fitted_range", "named_as"):
+        if getattr(f, key):
+            out[key] = getattr(f, key)
     return out
 
 
