@@ -27,10 +27,11 @@ def read_hsva_zigzag(path: str | Path, model: str = "nomoto") -> Recording:
     Both models: input ``delta`` (rad, positive to port, as recorded: it gives a negative r),
     measured ``r`` (rad/s) and ``psi`` (rad, unwrapped, relative to the first sample); time from
     0. The rudder column is the rudder angle itself, not a command: ``meta["measured_inputs"]``
-    says so (a delay the diagnosis finds on it is no actuator delay). ``mmg`` adds the input ``n_p`` (rev/s, column 10) and the measured body velocities ``u``,
-    ``v`` (m/s): the recorded velocities are EARTH-fixed, so they are rotated into the body
-    axes by the recorded (absolute) heading, ``u = x_dot cos psi + y_dot sin psi``,
-    ``v = -x_dot sin psi + y_dot cos psi`` (at the point the carriage tracks, taken as midship).
+    says so (a delay the diagnosis finds on it is no actuator delay). ``mmg`` adds the input
+    ``n_p`` (rev/s, column 10) and the measured body velocities ``u``, ``v`` (m/s): the recorded
+    velocities are EARTH-fixed, so they are rotated into the body axes by the recorded
+    (absolute) heading, ``u = x_dot cos psi + y_dot sin psi``, ``v = -x_dot sin psi + y_dot cos
+    psi`` (at the point the carriage tracks, taken as midship).
 
     :param path: the ``.dat`` file.
     :param model: ``"nomoto"`` or ``"mmg"``.
