@@ -151,8 +151,9 @@ def test_a_finding_used_beyond_its_fitted_range_is_named(diagnosis, larger):
     doc["findings"][0]["fitted_range"] = {"r": [-r_fit, r_fit]}
     result = validate(doc, [larger, record(5, 5, 4)])
     beyond, inside = (c.outside for c in result.records)
-    assert beyond and all("used outside the range it was fitted on: r" in w for w in beyond)
-    assert "up to 0.9 deg/s fitted" in beyond[0]
+    assert beyond and all("used outside the range it was fitted on" in w and "fitted over r" in w
+                          for w in beyond)
+    assert "fitted over r in [-0.9, 0.9] deg/s" in beyond[0]
     assert not inside  # a 5/5 zig-zag turns slower than 0.9 deg/s
     assert not validate(diagnosis, [larger]).records[0].outside  # no range given: no claim
 

@@ -73,7 +73,7 @@ def state_histories(fit: Fit) -> list[FloatArray]:
     n_x)`` in model units (the values its terms acted on while they were fitted)."""
     structure = fit.structure
     series, model = structure.series, structure.series.model
-    values = {f.name: getattr(series, f.name) for f in fields(Series)}
+    values = {f.name: getattr(series, f.name) for f in fields(Series) if f.init}
     every = _EveryState(**(values | {"channels": tuple(model.output_names)}),
                         fixed_excited=series.excited())
     wide = Structure(every, structure.names, structure.terms, structure.inputs)

@@ -58,14 +58,12 @@ from marine_envs.models.integrate import rk4
 from marine_envs.recording import Recording, read_recording
 
 from .output_error import _model_bandwidth
+from .ranges import outside_range
 
 #: The two models of a diagnosis, in the table's order.
 MODELS = ("nominal-calibrated", "corrected")
 #: The manoeuvres a record can be re-run as.
 RERUNS = ("zigzag", "turn")
-#: A record or prediction beyond a finding's fitted range by more than this share of the range's
-#: largest magnitude is "outside" it: a measured channel's noise alone must not trip it.
-RANGE_TOLERANCE = 0.05
 
 
 @dataclass(frozen=True)
@@ -76,8 +74,8 @@ class Host:
     models: dict[str, VehicleModel]  #: by :data:`MODELS`; the corrected one with its state terms
     input_effects: tuple[Effect, ...]  #: the corrected model's input effects
     output_effects: tuple[Effect, ...]  #: the corrected model's sensor biases
-    #: per finding with a ``fitted_range``: its label and ``{state: (low, high)}``, model units
-    ranges: tuple[tuple[str, dict[str, tuple[float, float]]], ...] = ()
+    #: the findings (JSON dicts) that say the range they were fitted over (``fitted_range``)
+    ranged: tuple[Mapping[str, Any], ...] = ()
 
     def effects(self, model: str) -> tuple[tuple[Effect, ...], tuple[Effect, ...]]:
         """The input effects and sensor biases of ``model`` (none for the nominal)."""
@@ -115,16 +113,13 @@ def read_host(document: Mapping[str, Any] | str | Path) -> Host:
         final = calibrated.with_params(**refitted) if refitted else calibrated
         state = [e for e in effects if e.kind == "state"]
         corrected = ModelWithEffects(final, state) if state else final
-        ranges = tuple((f"{f['effect']} on {f['target']}",
-                        {s: (float(lo), float(hi)) for s, (lo, hi) in f["fitted_range"].items()
-                         if s in base.state_names})
-                       for f in document["findings"] if f.get("fitted_range"))
+        ranged = tuple(f for f in document["findings"] if f.get("fitted_range"))
     except (AttributeError, KeyError, TypeError, ValueError) as error:
         raise ValueError(f"{where}: cannot rebuild its models: {type(error).__name__} "
                          f"{error}") from None
     return Host(base.name, {MODELS[0]: calibrated, MODELS[1]: corrected},
                 tuple(e for e in effects if e.kind == "input"),
-                tuple(e for e in effects if e.kind == "output"), ranges)
+                tuple(e for e in effects if e.kind == "output"), ranged)
 
 
 # -- the results ----------------------------------------------------------------------------------
@@ -422,30 +417,20 @@ def _prediction(host: Host, name: str, mode: str, check: RecordCheck, time: np.n
 
 def _outside(host: Host, check: RecordCheck) -> list[str]:
     """Each finding used beyond the range of a state it was fitted over, by the record or by
-    the corrected model's predictions, in words."""
+    the corrected model's predictions, in words (:func:`.ranges.outside_range`)."""
     model, rec = host.models[MODELS[1]], check.recording
-    out = []
-    for label, ranges in host.ranges:
-        for state, (low, high) in ranges.items():
-            i = model.state_names.index(state)
-            values = [p.states[:, i] for p in check.predictions if p.model == MODELS[1]]
-            if state in rec.measured_names:
-                values.append(rec.data[state].to_numpy())
-            here = np.concatenate(values)
-            here = here[np.isfinite(here)]
-            if not here.size:
-                continue
-            tol = RANGE_TOLERANCE * max(abs(low), abs(high))
-            unit, scale = _display_unit(model.state_units[i])
-            for beyond, edge, extreme, words in ((here.max() > high + tol, high, here.max(),
-                                                 "up to"),
-                                                (here.min() < low - tol, low, here.min(),
-                                                 "down to")):
-                if beyond:
-                    out.append(f"{label} used outside the range it was fitted on: {state} "
-                               f"{words} {edge * scale:.3g} {unit} fitted, "
-                               f"{extreme * scale:.3g} {unit} here")
-    return out
+    seen: dict[str, list[np.ndarray]] = {}
+    for i, state in enumerate(model.state_names):
+        seen[state] = [p.states[:, i] for p in check.predictions if p.model == MODELS[1]]
+        if state in rec.measured_names:
+            seen[state].append(rec.data[state].to_numpy())
+    for name in rec.input_names:
+        seen.setdefault(name, []).append(rec.data[name].to_numpy())
+    units = dict(zip(model.state_names + model.input_names,
+                     model.state_units + model.input_units, strict=True))
+    here = {name: np.concatenate(values) for name, values in seen.items() if values}
+    return [message for finding in host.ranged
+            for message in outside_range(finding, here, units)]
 
 
 def _display_unit(unit: str) -> tuple[str, float]:
