@@ -28,6 +28,7 @@ from .explain import describe, separating_test
 from .modes import check_modes, free_decays, mode_start
 from .output_error import Fit, Series, term_label
 from .result import Diagnosis, Finding
+from .spread import across_classes, between_records, widen_findings
 
 #: A parameter whose standard deviation exceeds this share of its value is not identified.
 MAX_RELATIVE_STD = 0.5
@@ -130,7 +131,28 @@ def _diagnosis(comparison: Comparison, calibrate: Sequence[str],
         diagnosis.unexplained = _unexplained(comparison)
         diagnosis.not_kept = _not_kept(comparison)
     diagnosis.alternatives = _alternatives(comparison)
+    with_spread(diagnosis, comparison, calibrate)
     return diagnosis
+
+
+def with_spread(diagnosis: Diagnosis, comparison: Comparison, calibrate: Sequence[str]) -> None:
+    """The coefficients' spread between records (or pieces of one) beside their statistical
+    std, the uncertainty reported being the larger; and, when the series spans several
+    amplitude classes, the leave-one-class-out validation (:mod:`.spread`)."""
+    if not (comparison.accepted or calibrate):
+        return
+    spread = between_records(comparison)
+    widen_findings(diagnosis.findings, spread)
+    quality = diagnosis.calibration_quality
+    table = quality.get("with_findings") or quality.get("parameters", {})
+    for name, entry in table.items():
+        found = spread["coefficients"].get(name)
+        if found:
+            entry["between_records"] = {k: found[k] for k in ("spread", "per_record")} | {
+                "records": spread["records"], "method": spread["method"]}
+            entry["uncertainty"] = found["uncertainty"]
+    diagnosis.fit["between_records"] = spread
+    diagnosis.across_classes = across_classes(comparison)
 
 
 def _values(fit: Fit, names: Sequence[str]) -> dict[str, float]:

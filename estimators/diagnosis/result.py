@@ -40,6 +40,9 @@ class Finding:
     explanation: str
     standard_form: dict[str, float] = field(default_factory=dict)
     withdrawn: str = ""
+    #: per parameter: its spread between records (or pieces of one) beside the statistical std
+    #: (then ``std`` holds the larger of the two)
+    between_records: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def as_effect(self) -> Effect:
         return Effect(self.effect, self.target, self.parameters)
@@ -67,6 +70,8 @@ class Diagnosis:
     calibration_quality: dict[str, Any] = field(default_factory=dict)
     unexplained: dict[str, Any] = field(default_factory=dict)
     alternatives: list[dict[str, Any]] = field(default_factory=list)
+    #: leave-one-amplitude-class-out validation of a model-test series (:mod:`.spread`)
+    across_classes: dict[str, Any] = field(default_factory=dict)
     #: with ``unexplained``: the candidates of the search's last round and why none was kept
     not_kept: list[dict[str, Any]] = field(default_factory=list)
     #: recorded disturbances the model took as known inputs (a logged wind, current, command)
@@ -99,7 +104,7 @@ class Diagnosis:
         if self.calibration:
             out["calibration"] = self.calibration
         for key in ("calibration_quality", "model_check", "unexplained", "not_kept",
-                    "alternatives"):
+                    "alternatives", "across_classes"):
             if getattr(self, key):
                 out[key] = getattr(self, key)
         if self.measured_disturbances:
@@ -210,6 +215,8 @@ def _finding_dict(f: Finding) -> dict[str, Any]:
         out["standard_form"] = f.standard_form
     if f.withdrawn:
         out["withdrawn"] = f.withdrawn
+    if f.between_records:
+        out["between_records"] = f.between_records
     return out
 
 
