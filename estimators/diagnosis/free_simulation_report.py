@@ -385,11 +385,13 @@ def across_classes_lines(diagnosis: Diagnosis) -> list[str]:
             after = row["corrected"]["rmse"][channel] * factor
             out.append(f"- Fitted on {' and '.join(row['fitted_on'])}, {correction} makes the "
                        f"{row['class']} test worse: {before:.3g} -> {after:.3g} {shown}.")
+    tried = across.get("richer", {})
+    out += [f"- {sentence[0].upper()}{sentence[1:]}." for sentence in tried.values()]
     if across["worse"]:
-        richer = across.get("richer_models") or []
-        out.append("- " + across["verdict"][0].upper() + across["verdict"][1:] + "; "
-                   + (f"richer host models to try: {', '.join(richer)}." if richer else
-                      "no richer host model is declared for this one."))
+        untried = [m for m in across.get("richer_models", []) if m not in tried]
+        out.append("- " + across["verdict"][0].upper() + across["verdict"][1:] + (
+            f"; richer host models to try: {', '.join(untried)}." if untried else
+            "." if tried else "; no richer host model is declared for this one."))
     return out + [""]
 
 

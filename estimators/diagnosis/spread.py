@@ -345,58 +345,85 @@ def _class_label(series: Series, amplitude: dict[str, float]) -> str:
 
 
 # -- across classes -------------------------------------------------------------------------------
-def across_classes(comparison: Comparison,
-                   tolerance: float = CLASS_TOLERANCE) -> dict[str, Any]:
+def richer_models(series: Series) -> tuple[str, ...]:
+    """The richer host models the series' model declares (``richer_models`` ClassVar, e.g.
+    ``("mmg",)`` on ``nomoto``): names a caller may validate with :func:`across_classes`."""
+    return tuple(getattr(type(series.model), "richer_models", ()))
+
+
+def across_classes(comparison: Comparison, tolerance: float = CLASS_TOLERANCE,
+                   richer: Sequence[tuple[Series, Sequence[str]]] = ()) -> dict[str, Any]:
     """Leave one amplitude class out (module doc), for the nominal-calibrated and the corrected
-    model; empty when the series spans fewer than two classes or nothing was corrected."""
+    model and each ``richer`` host (the same records, in the same order, as a series of the
+    richer model, with the parameters to calibrate on the training classes); empty when the
+    series spans fewer than two classes or nothing was corrected."""
     series = comparison.series
     classes = amplitude_classes(series, tolerance)
     if len(classes) < 2 or not comparison.accepted:
         return {}
     nominal, final = comparison.nominal, comparison.final
+    hosts = [Structure(host, tuple(names)) for host, names in richer]
     channel = _headline(series)
     rows = []
     for c in classes:
         held = c["records"]
-        rows.append({"class": c["label"], "records": [series.runs[k].name for k in held],
-                     "fitted_on": [o["label"] for o in classes if o is not c],
-                     "nominal": class_error(nominal, held), "corrected": class_error(final, held)})
+        row = {"class": c["label"], "records": [series.runs[k].name for k in held],
+               "fitted_on": [o["label"] for o in classes if o is not c],
+               "nominal": class_error(nominal.structure, nominal.theta, held),
+               "corrected": class_error(final.structure, final.theta, held)}
+        if hosts:
+            row["richer"] = {h.series.model.name: class_error(h, h.start(), held)
+                             for h in hosts}
+        rows.append(row)
     for row in rows:
         before, after = row["nominal"], row["corrected"]
         row["cut"] = 1 - math.sqrt(after["mean_square"] / max(before["mean_square"], 1e-300)) \
             if math.isfinite(after["mean_square"]) else -math.inf
         row["worse"] = not after["mean_square"] <= (1 + WORSE) * before["mean_square"]
     worse = [row["class"] for row in rows if row["worse"]]
-    return {"method": "leave one amplitude class out: each class free-simulated (recorded "
-                      "inputs replayed, only its initial states fitted) by the models fitted "
-                      "on the other classes",
-            "tolerance": tolerance, "channel": channel, "classes": rows, "worse": worse,
-            "richer_models": list(getattr(type(series.model), "richer_models", ())),
-            "verdict": ("the host model is too simple for these records: the correction "
-                        "fitted on other amplitudes makes " + ", ".join(worse) + " worse")
-            if worse else ""}
+    out = {"method": "leave one amplitude class out: each class free-simulated (recorded "
+                     "inputs replayed, only its initial states fitted) by the models fitted "
+                     "on the other classes",
+           "tolerance": tolerance, "channel": channel, "classes": rows, "worse": worse,
+           "richer_models": list(richer_models(series)),
+           "verdict": ("the host model is too simple for these records: the correction "
+                       "fitted on other amplitudes makes " + ", ".join(worse) + " worse")
+           if worse else ""}
+    if hosts:
+        out["richer"] = _richer_verdict(rows, channel)
+    return out
 
 
-def class_error(whole: Fit, held: Sequence[int]) -> dict[str, Any]:
-    """The structure of ``whole`` fitted on every record but ``held``, then free-simulating
+def _richer_verdict(rows: Sequence[dict[str, Any]], channel: str) -> dict[str, str]:
+    """Per richer host: whether it explains the held-out classes (every class's RMS in the
+    headline channel at most the nominal model's, by :data:`WORSE`, and their mean below)."""
+    out = {}
+    for name in rows[0]["richer"]:
+        ratios = [row["richer"][name]["rmse"][channel] / max(row["nominal"]["rmse"][channel],
+                                                              1e-300) for row in rows]
+        good = all(r <= 1 + WORSE for r in ratios) and float(np.mean(ratios)) < 1
+        out[name] = (f"{name} explains the held-out classes ({channel} RMS "
+                     f"{float(np.mean(ratios)):.2f}x the nominal model's on average)" if good else
+                     f"{name} does not explain them either ({channel} RMS "
+                     + ", ".join(f"{r:.2f}x" for r in ratios) + " the nominal model's)")
+    return out
+
+
+def class_error(structure: Structure, theta: FloatArray, held: Sequence[int]) -> dict[str, Any]:
+    """``structure`` fitted (from ``theta``) on every record but ``held``, then free-simulating
     each held record (its own initial states fitted): RMS per channel (model units) and the
     mean square in signal scales (runs alike)."""
-    structure = whole.structure
     series = structure.series
-    per_state = len(structure.free_states)
-    first = len(structure.names) + len(structure.terms)
-    own = np.concatenate([np.arange(first + r * per_state, first + (r + 1) * per_state)
-                          for r in held]).astype(int)
+    own = np.concatenate([_states_of(structure, r) for r in held]).astype(int)
     rows: list[Any] = all_rows(series)
     for r in held:
         rows[r] = None
-    trained = fit(structure, rows, whole.theta, fixed=own).theta
+    trained = fit(structure, rows, theta, fixed=own).theta
     errors = []
     for r in held:
         alone: list[Any] = [None] * len(series.runs)
         alone[r] = np.ones(len(series.runs[r].time), dtype=bool)
-        rest = np.setdiff1d(np.arange(structure.size), own[np.isin(own, _states_of(
-            structure, r))])
+        rest = np.setdiff1d(np.arange(structure.size), _states_of(structure, r))
         fitted = fit(structure, alone, trained, fixed=rest).theta
         errors.append((structure.simulate(fitted, r)[0] - series.runs[r].y) / series.scale)
     diverged = any(not np.all(np.abs(e) <= 1e2) for e in errors)
@@ -409,7 +436,8 @@ def class_error(whole: Fit, held: Sequence[int]) -> dict[str, Any]:
                                                                      for e in errors]))}
 
 
-def _states_of(structure: Structure, run: int) -> FloatArray:
+def _states_of(structure: Structure, run: int) -> NDArray[np.int_]:
+    """Indices of run ``run``'s initial states among the structure's unknowns."""
     per_state = len(structure.free_states)
     first = len(structure.names) + len(structure.terms)
     return np.arange(first + run * per_state, first + (run + 1) * per_state)
