@@ -23,7 +23,7 @@ from estimators.diagnosis.comparison import (
 from estimators.diagnosis.free_simulation import _diagnosis
 from estimators.diagnosis.free_simulation_report import markdown
 from estimators.diagnosis.output_error import Series, basis, fit
-from estimators.diagnosis.spread import amplitude_classes, pieces
+from estimators.diagnosis.spread import across_classes, amplitude_classes, pieces
 from marine_envs.models import get_model
 from marine_envs.models.effects import Effect
 from marine_envs.recording import Recording
@@ -134,3 +134,25 @@ def test_a_correction_that_spoils_another_class_is_reported():
     text = markdown(d)
     assert f"makes the {rows['5']['class']} test worse" in text
     assert "host model is too simple" in text.split("## Model check")[0]  # in the verdict
+
+
+def test_a_richer_host_is_validated_on_the_same_classes():
+    """The hook for a richer host model: a series of it (here the same Nomoto model, so it
+    must do exactly as the nominal-calibrated one) is fitted on the training classes and
+    judged on each held-out class beside the nominal and corrected models."""
+    records = [lagged_zigzag(30, 10, seed=4, duration=80.0), lagged_zigzag(5, 1, seed=5,
+                                                                          duration=80.0)]
+    series = Series.from_recordings(records, get_model("nomoto"), ["K", "T"])
+    comparison = compare(series, ["K", "T"], None, ComparisonConfig(max_findings=0))
+    r3 = Candidate(basis("nonlinear_damping", "r", form="cubic"))
+    wider = extend(comparison.nominal.structure, r3)
+    scored = Scored(r3, fit(wider, all_rows(series), _warm(comparison.nominal.structure,
+                                                           comparison.nominal.theta, wider)),
+                    comparison.nominal_held_out)
+    comparison.rounds.append([scored])
+    comparison.accepted.append(scored)
+    across = across_classes(comparison, richer=[(series, ("K", "T"))])
+    for row in across["classes"]:
+        assert row["richer"]["nomoto"]["rmse"]["psi"] == pytest.approx(
+            row["nominal"]["rmse"]["psi"], rel=1e-3)
+    assert across["richer"]["nomoto"].startswith("nomoto does not explain them either")

@@ -151,6 +151,10 @@ def with_spread(diagnosis: Diagnosis, comparison: Comparison, calibrate: Sequenc
             entry["between_records"] = {k: found[k] for k in ("spread", "per_record")} | {
                 "records": spread["records"], "method": spread["method"]}
             entry["uncertainty"] = found["uncertainty"]
+            relative = found["spread"] / max(abs(entry["value"]), 1e-300)
+            if entry["status"] == "identified" and relative > MAX_RELATIVE_STD:
+                entry["status"] = (f"poorly identified (it moves by {relative:.0%} of its value "
+                                   "between records)")
     diagnosis.fit["between_records"] = spread
     diagnosis.across_classes = across_classes(comparison)
 
