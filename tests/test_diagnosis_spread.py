@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from test_diagnosis_free_simulation import decay
+from test_diagnosis_free_simulation import decay, zigzag
 
 from estimators.diagnosis import diagnose
 from estimators.diagnosis.comparison import (
@@ -106,6 +106,18 @@ def test_a_zigzag_series_of_two_amplitudes_is_grouped_into_its_classes():
     assert math.degrees(classes[0]["amplitude"]["input"]) == pytest.approx(25, rel=0.02)
     assert math.degrees(classes[0]["amplitude"]["check"]) == pytest.approx(5, rel=0.15)
     assert classes[0]["label"].startswith("25/")
+
+
+def test_a_correction_that_is_the_truth_holds_across_classes():
+    """Zigzags 20/20 and 10/10 of a Nomoto ship with Norrbin's r^3: the diagnosis names it and
+    it improves each class fitted on the other; the host model is not blamed."""
+    d = diagnose([zigzag(20, c3=30.0, seed=12), zigzag(10, c3=30.0, seed=13)], "nomoto",
+                 calibrate="K,T", method="free")
+    assert [(f.effect, f.target) for f in d.findings][:1] == [("nonlinear_damping", "r")]
+    across = d.across_classes
+    assert len(across["classes"]) == 2 and not across["worse"] and not across["verdict"]
+    assert all(row["cut"] > 0.3 for row in across["classes"])
+    assert "too simple" not in markdown(d)
 
 
 def test_a_correction_that_spoils_another_class_is_reported():
