@@ -4,12 +4,12 @@ between records and its validity across amplitude classes.
 * **Between records** (:func:`between_records`): the final model refitted whole on each record
   of the series alone (a single record: on consecutive pieces of it by amplitude, see
   :func:`pieces`). Each coefficient (calibrated parameters, the findings' coefficients, the
-  standard form's) gets the standard deviation of its per-record values beside its statistical
-  std; the reported uncertainty is the larger of the two. A record's residuals give a std that
-  assumes the model is right; when the coefficient moves with the amplitude span, the spread
-  between records is the honest figure. An accepted amplitude term whose nearest rival (the
-  other damping or restoring form on the same state) fits some record better is named: the
-  data do not tell them apart.
+  standard form's) gets the spread of its per-record values about it (:func:`excess_spread`)
+  beside its statistical std; the reported uncertainty is the larger of the two. A record's
+  residuals give a std that assumes the model is right; when the coefficient moves with the
+  amplitude span, the spread between records is the honest figure. An accepted amplitude term
+  whose nearest rival (the other damping or restoring form on the same state) fits some record
+  better is named: the data do not tell them apart.
 * **Across amplitude classes** (:func:`amplitude_classes`, :func:`across_classes`): records
   whose manoeuvre amplitude (largest input, or a free decay's initial amplitude; a zigzag's
   heading check too) agree within :data:`CLASS_TOLERANCE` form a class; with two classes or
@@ -89,9 +89,9 @@ def _cuts(y: FloatArray, time: FloatArray, count: int) -> list[int]:
 # -- between records ------------------------------------------------------------------------------
 def between_records(comparison: Comparison) -> dict[str, Any]:
     """The final model refitted on each piece (:func:`pieces`): per coefficient its value on
-    the whole series, statistical std, the per-piece values, their spread (std, ddof 1) and
-    the reported ``uncertainty`` (the larger); and the amplitude terms that swap with a rival
-    from piece to piece (``swaps``)."""
+    the whole series, statistical std, the per-piece values and stds, their spread
+    (:func:`excess_spread`) and the reported ``uncertainty`` (the larger); and the amplitude
+    terms that swap with a rival from piece to piece (``swaps``)."""
     final = comparison.final
     structure = final.structure
     parts = pieces(comparison.series)
@@ -106,11 +106,26 @@ def between_records(comparison: Comparison) -> dict[str, Any]:
     table = {}
     for label, (value, std) in whole.items():
         values = [p[label][0] for p in per]
-        spread = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
+        stds = [p[label][1] for p in per]
+        spread = excess_spread(value, values, stds)
         table[label] = {"value": value, "statistical_std": std, "spread": spread,
-                        "per_record": values, "uncertainty": max(std, spread)}
+                        "per_record": values, "per_record_std": stds,
+                        "uncertainty": max(std, spread)}
     return {"method": method, "records": names, "coefficients": table,
             "swaps": _swaps(comparison, parts, refits)}
+
+
+def excess_spread(value: float, values: Sequence[float], stds: Sequence[float]) -> float:
+    """The RMS deviation of the per-record values from the whole series' value in excess of
+    each record's own statistical std: ``sqrt(mean(max(0, (v_k - v)^2 - s_k^2)))``. A piece
+    that cannot tell the coefficient (a small-amplitude end of a decay for a cubic term) adds
+    nothing; a whole-series value outside every piece's (a nonlinear trade between terms) is
+    counted. Each record then lies within ``sqrt(n)`` of it, combined with its own std."""
+    if len(values) < 2:
+        return 0.0
+    excess = [max(0.0, (v - value) ** 2 - (s**2 if math.isfinite(s) else math.inf))
+              for v, s in zip(values, stds, strict=True)]
+    return float(math.sqrt(np.mean(excess)))
 
 
 def _refit(structure: Structure, whole: Fit, part: Series) -> Fit:
