@@ -376,14 +376,14 @@ def across_classes_lines(diagnosis: Diagnosis) -> list[str]:
         before = row["nominal"]["rmse"][channel] * factor
         after = row["corrected"]["rmse"][channel] * factor
         out.append(f"| {cell(row['class'])} | {cell(', '.join(row['records']))} | "
-                   f"{cell(' and '.join(row['fitted_on']))} | {before:.3g} | {after:.3g} | "
+                   f"{cell(_listed(row['fitted_on']))} | {before:.3g} | {after:.3g} | "
                    f"{'diverged' if row['corrected']['diverged'] else format(row['cut'], '.0%')} |")
     out.append("")
     for row in across["classes"]:
         if row["worse"]:
             before = row["nominal"]["rmse"][channel] * factor
             after = row["corrected"]["rmse"][channel] * factor
-            out.append(f"- Fitted on {' and '.join(row['fitted_on'])}, {correction} makes the "
+            out.append(f"- Fitted on {_listed(row['fitted_on'])}, {correction} makes the "
                        f"{row['class']} test worse: {before:.3g} -> {after:.3g} {shown}.")
     tried = across.get("richer", {})
     out += [f"- {sentence[0].upper()}{sentence[1:]}." for sentence in tried.values()]
@@ -393,6 +393,11 @@ def across_classes_lines(diagnosis: Diagnosis) -> list[str]:
             f"; richer host models to try: {', '.join(untried)}." if untried else
             "." if tried else "; no richer host model is declared for this one."))
     return out + [""]
+
+
+def _listed(names: Sequence[str]) -> str:
+    """``a, b and c``."""
+    return " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
 
 
 def _unexplained(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:

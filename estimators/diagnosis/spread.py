@@ -352,7 +352,7 @@ def _class_label(series: Series, amplitude: dict[str, float]) -> str:
         moving = np.flatnonzero(series.moving)
         degrees = all(angle[j] for j in moving)
         scale = math.degrees(1.0) if degrees else 1.0
-        text = f"{amplitude['input'] * scale:.3g}"
+        text = f"{amplitude['input'] * scale:.2g}"
         if "check" in amplitude:
             text += f"/{math.degrees(amplitude['check']):.2g}"
         return text
