@@ -36,12 +36,17 @@ held-out improvement and the seconds it took. Cases (``--cases``):
    speed read off the record) and replayed with its recorded rudder and propeller: heading RMS
    and first / second overshoot errors against the record; about 30 s of CPU.
 
+6. ``decay-spread``: the shipped decay and the 100 Hz original (one condition), each alone,
+   each coefficient refitted on three consecutive pieces of the record by amplitude.
+
 Acceptance targets (from the issue), checked at the end:
 
 - roll decay: calibrated wn within 2 % and zeta within 20 % of the plain LS linear fit; top
   finding amplitude-dependent damping and/or cubic restoring on p, held-out improvement >= 50 %;
 - the same top finding at 100/20/10 Hz and on 80 % of the record, and with nominal zeta anywhere
   in [0, 2x] the LS fit's;
+- decay spread: each coefficient's reported uncertainty u covers its values on the record's
+  pieces and on the other record of the condition (all within 2 u combined with theirs);
 - zigzag series: top finding nonlinear yaw damping on r (r^3 or r|r|); leave-one-out
   free-simulation heading error cut >= 30 % (the diagnosis's pooled psi RMS before → after);
 - zigzag classes (held-out pairs only): the calibrated MMG's mean heading RMS re-run as the
@@ -114,7 +119,7 @@ HOVER_CPU_TARGET = 180.0  #: s of CPU for the hovercraft series, calibrated and 
 #: HOVER_CHECK_RUNS; 11-35-57 is left out there: its tracking is corrupt from 10 to 15 s).
 HOVER_HELD_OUT = ("2019-04-16-11-30-28", "2019-04-16-11-32-20", "2019-04-16-12-29-28")
 CASES = ("roll-decay", "sampling", "nominal-zeta", "zigzag-series", "hovercraft-epfl",
-         "zigzag-classes")
+         "zigzag-classes", "decay-spread")
 #: Effects that make a decay amplitude-dependent (roll-decay target).
 AMPLITUDE_EFFECTS = ("quadratic_damping", "nonlinear_damping", "nonlinear_restoring")
 #: Effects that are nonlinear yaw damping (zigzag target).
@@ -675,10 +680,54 @@ def case_zigzag_classes(shared: Path, notes: list[str]) -> list[dict[str, Any]]:
     return rows
 
 
+def case_decay_spread(shared: Path, notes: list[str]) -> list[dict[str, Any]]:
+    """The shipped 10 Hz decay and the 100 Hz original (one condition), each diagnosed alone
+    (``usv``, ``wn,zeta``): every coefficient's value on each piece of the record and on the
+    other record within two reported uncertainties (:func:`spread_covered`)."""
+    recordings = {"shipped 10 Hz": shipped_decay()}
+    path = shared / ROLL_100HZ
+    if path.is_file():
+        recordings["original 100 Hz"] = decay_versions(path)["100 Hz"]
+    else:
+        notes.append(f"decay-spread: {path} is absent; the shipped decay alone")
+    rows = [run_diagnosis(f"decay-spread {label}", [rec], "usv", "wn,zeta")
+            for label, rec in recordings.items()]
+    for row in rows:
+        row["spread_covered"], lines = spread_covered(row, rows)
+        notes += [f"{row['case']}: {line}" for line in lines]
+    return rows
+
+
+def spread_covered(row: dict[str, Any], rows: Sequence[dict[str, Any]]) -> tuple[bool, list[str]]:
+    """Whether each coefficient's reported uncertainty u (the larger of its statistical std and
+    the spread between the record's pieces) covers its value on every piece (within
+    2 sqrt(u^2 + s^2), s the piece's own std) and on the other rows of the same condition
+    (within 2 sqrt(u^2 + u'^2)); a line per coefficient."""
+    spread = row.get("diagnosis", {}).get("fit", {}).get("between_records")
+    if not spread:
+        return False, ["no spread between pieces was reported"]
+    others = [r["diagnosis"]["fit"]["between_records"]["coefficients"] for r in rows
+              if r is not row and r.get("diagnosis", {}).get("fit", {}).get("between_records")]
+    ok, lines = True, []
+    for label, c in spread["coefficients"].items():
+        pairs = [*zip(c["per_record"], c["per_record_std"], strict=True),
+                 *((o[label]["value"], o[label]["uncertainty"]) for o in others if label in o)]
+        worst = max(abs(v - c["value"]) / max(math.hypot(c["uncertainty"], s), 1e-300)
+                    for v, s in pairs)
+        ok &= worst <= 2
+        lines.append(f"{label} = {_fmt(c['value'])} ± {_fmt(c['uncertainty'])} (statistical "
+                     f"{_fmt(c['statistical_std'])}, spread {_fmt(c['spread'])}); pieces "
+                     + " -> ".join(_fmt(v) for v in c["per_record"])
+                     + f"; farthest value {worst:.1f} combined stds away")
+    lines += [swap["sentence"] for swap in spread["swaps"]]
+    return ok, lines
+
+
 RUNNERS: dict[str, Callable[..., list[dict[str, Any]]]] = {
     "roll-decay": case_roll_decay, "sampling": case_sampling,
     "nominal-zeta": case_nominal_zeta, "zigzag-series": case_zigzag,
-    "hovercraft-epfl": case_hovercraft, "zigzag-classes": case_zigzag_classes}
+    "hovercraft-epfl": case_hovercraft, "zigzag-classes": case_zigzag_classes,
+    "decay-spread": case_decay_spread}
 
 
 def _same_top(case: str, rows: Sequence[dict[str, Any]]) -> str:
@@ -747,6 +796,9 @@ def acceptance(rows: Sequence[dict[str, Any]]) -> list[tuple[str, bool | None, s
             out.append((what, len(tops) == 1 and None not in tops,
                         ", ".join(sorted("none" if t is None else " on ".join(t)
                                          for t in tops))))
+    out += [(f"{row['case']}: each coefficient's reported uncertainty covers (2 u) its "
+             "pieces and the other record", row["spread_covered"], row["verdict"])
+            for row in rows if "spread_covered" in row]
     series = by_case.get("zigzag-series")
     if series:
         top = series["top"]

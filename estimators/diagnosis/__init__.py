@@ -21,6 +21,7 @@ model tests (decays, zigzags, lab runs, series of them), judged in free simulati
 * :mod:`.modes` - a free decay's frequency, damping and extinction curve against the model's modes;
 * :mod:`.output_error` - recordings on the model's bandwidth, batched free simulations, fits;
 * :mod:`.comparison` - nested models refitted whole and compared on held-out data;
+* :mod:`.spread` - the coefficients' spread between records, validation across amplitude classes;
 * :mod:`.free_simulation` - the diagnosis of a series; :mod:`.free_simulation_report` and
   :mod:`.free_simulation_figures` its report;
 

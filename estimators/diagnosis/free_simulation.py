@@ -42,6 +42,7 @@ from .ranges import (
     state_histories,
 )
 from .result import Diagnosis, Finding
+from .spread import across_classes, between_records, widen_findings
 
 BoolArray = NDArray[np.bool_]
 FloatArray = NDArray[np.float64]
@@ -364,7 +365,32 @@ def _diagnosis(comparison: Comparison, calibrate: Sequence[str],
         diagnosis.unexplained = _unexplained(comparison)
         diagnosis.not_kept = _not_kept(comparison)
     diagnosis.alternatives = _alternatives(comparison)
+    with_spread(diagnosis, comparison, calibrate)
     return diagnosis
+
+
+def with_spread(diagnosis: Diagnosis, comparison: Comparison, calibrate: Sequence[str]) -> None:
+    """The coefficients' spread between records (or pieces of one) beside their statistical
+    std, the uncertainty reported being the larger; and, when the series spans several
+    amplitude classes, the leave-one-class-out validation (:mod:`.spread`)."""
+    if not (comparison.accepted or calibrate):
+        return
+    spread = between_records(comparison)
+    widen_findings(diagnosis.findings, spread)
+    quality = diagnosis.calibration_quality
+    table = quality.get("with_findings") or quality.get("parameters", {})
+    for name, entry in table.items():
+        found = spread["coefficients"].get(name)
+        if found:
+            entry["between_records"] = {k: found[k] for k in ("spread", "per_record")} | {
+                "records": spread["records"], "method": spread["method"]}
+            entry["uncertainty"] = found["uncertainty"]
+            relative = found["spread"] / max(abs(entry["value"]), 1e-300)
+            if entry["status"] == "identified" and relative > MAX_RELATIVE_STD:
+                entry["status"] = (f"poorly identified (it moves by {relative:.0%} of its value "
+                                   "between records)")
+    diagnosis.fit["between_records"] = spread
+    diagnosis.across_classes = across_classes(comparison)
 
 
 def _values(fit: Fit, names: Sequence[str]) -> dict[str, float]:

@@ -46,7 +46,8 @@ def markdown(diagnosis: Diagnosis, figures: Sequence[tuple[str, str]] = (),
         return "\n".join(parts + _model_check(diagnosis, comparison))
     parts += _model_check(diagnosis, comparison) + _calibration(diagnosis, comparison) \
         + _findings(diagnosis, comparison) + _held_out(diagnosis, comparison) \
-        + _alternatives(diagnosis) + _unexplained(diagnosis, comparison)
+        + _alternatives(diagnosis) + spread_lines(diagnosis) + across_classes_lines(diagnosis) \
+        + _unexplained(diagnosis, comparison)
     if figures:
         parts += ["## Figures", ""]
         for name, caption in figures:
@@ -72,7 +73,7 @@ def verdict(diagnosis: Diagnosis) -> str:
                 "the sensor noise")
         return (f"**Mismatch found:** the model lacks {names}{gain}."
                 + (f" **Still unexplained:** {left}." if left else
-                   " What is left is within the sensor noise."))
+                   " What is left is within the sensor noise.") + _class_limit(diagnosis))
     if diagnosis.mismatch:
         return ("**Mismatch, unexplained by the catalogue:** the calibrated model does not "
                 "simulate the held-out data within the sensor noise" + (f" ({left})" if left
@@ -356,6 +357,77 @@ def _alternatives(diagnosis: Diagnosis) -> list[str]:
         out.append(f"- `{alt['chosen']}` (chosen) or `{alt['equally']}`: to separate them, "
                    f"{alt['separate_by']}.")
     return out + [""]
+
+
+def _class_limit(diagnosis: Diagnosis) -> str:
+    """The verdict's sentence when the correction makes a held-out amplitude class worse."""
+    verdict_ = diagnosis.across_classes.get("verdict", "")
+    return f" **But {verdict_}** (see *Across amplitude classes*)." if verdict_ else ""
+
+
+def spread_lines(diagnosis: Diagnosis) -> list[str]:
+    """Each coefficient's statistical std beside its spread between records (or pieces of
+    one), the larger reported; the amplitude terms that swap with the record's span."""
+    spread = diagnosis.fit.get("between_records")
+    if not spread or len(spread["records"]) < 2:
+        return []
+    out = ["## Spread between records", "",
+           f"Method: {spread['method']}. The uncertainty reported for each coefficient (in the "
+           "findings and the verdict) is the larger of its statistical std (from the residuals, "
+           "which assume the model is right) and this spread.", "",
+           "| coefficient | value | statistical std | spread | per record: "
+           + ", ".join(cell(r) for r in spread["records"]) + " |",
+           "| --- | ---: | ---: | ---: | --- |"]
+    for label, c in spread["coefficients"].items():
+        wider = " **(reported)**" if c["spread"] > c["statistical_std"] else ""
+        out.append(f"| `{label}` | {num(c['value'])} | {num(c['statistical_std'])} | "
+                   f"{num(c['spread'])}{wider} | {', '.join(num(v) for v in c['per_record'])} |")
+    out.append("")
+    out += [f"- {swap['sentence'][0].upper()}{swap['sentence'][1:]}." for swap in spread["swaps"]]
+    return out + ([""] if spread["swaps"] else [])
+
+
+def across_classes_lines(diagnosis: Diagnosis) -> list[str]:
+    """The leave-one-amplitude-class-out table and a sentence per class the correction
+    makes worse."""
+    across = diagnosis.across_classes
+    if not across:
+        return []
+    channel = across["channel"]
+    unit = _units(diagnosis).get(channel, "")
+    factor, shown = display_unit(unit)
+    correction = ", ".join(f"`{f.effect}` on `{f.target}`" for f in diagnosis.findings) \
+        or "the correction"
+    out = ["## Across amplitude classes", "", f"Validation: {across['method']} (amplitudes "
+           f"within {across['tolerance']:.0%} form a class). RMS error in `{channel}` ({shown}):",
+           "", "| held-out class | records | fitted on | nominal-calibrated | corrected | cut |",
+           "| --- | --- | --- | ---: | ---: | ---: |"]
+    for row in across["classes"]:
+        before = row["nominal"]["rmse"][channel] * factor
+        after = row["corrected"]["rmse"][channel] * factor
+        out.append(f"| {cell(row['class'])} | {cell(', '.join(row['records']))} | "
+                   f"{cell(_listed(row['fitted_on']))} | {before:.3g} | {after:.3g} | "
+                   f"{'diverged' if row['corrected']['diverged'] else format(row['cut'], '.0%')} |")
+    out.append("")
+    for row in across["classes"]:
+        if row["worse"]:
+            before = row["nominal"]["rmse"][channel] * factor
+            after = row["corrected"]["rmse"][channel] * factor
+            out.append(f"- Fitted on {_listed(row['fitted_on'])}, {correction} makes the "
+                       f"{row['class']} test worse: {before:.3g} -> {after:.3g} {shown}.")
+    tried = across.get("richer", {})
+    out += [f"- {sentence[0].upper()}{sentence[1:]}." for sentence in tried.values()]
+    if across["worse"]:
+        untried = [m for m in across.get("richer_models", []) if m not in tried]
+        out.append("- " + across["verdict"][0].upper() + across["verdict"][1:] + (
+            f"; richer host models to try: {', '.join(untried)}." if untried else
+            "." if tried else "; no richer host model is declared for this one."))
+    return out + [""]
+
+
+def _listed(names: Sequence[str]) -> str:
+    """``a, b and c``."""
+    return " and ".join([", ".join(names[:-1]), names[-1]] if len(names) > 1 else names)
 
 
 def _unexplained(diagnosis: Diagnosis, comparison: Comparison) -> list[str]:

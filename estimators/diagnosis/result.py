@@ -46,6 +46,9 @@ class Finding:
     withdrawn: str = ""
     fitted_range: dict[str, list[float]] = field(default_factory=dict)
     named_as: dict[str, Any] = field(default_factory=dict)
+    #: per parameter: its spread between records (or pieces of one) beside the statistical std
+    #: (then ``std`` holds the larger of the two)
+    between_records: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def as_effect(self) -> Effect:
         return Effect(self.effect, self.target, self.parameters)
@@ -77,6 +80,8 @@ class Diagnosis:
     calibration_quality: dict[str, Any] = field(default_factory=dict)
     unexplained: dict[str, Any] = field(default_factory=dict)
     alternatives: list[dict[str, Any]] = field(default_factory=list)
+    #: leave-one-amplitude-class-out validation of a model-test series (:mod:`.spread`)
+    across_classes: dict[str, Any] = field(default_factory=dict)
     #: with ``unexplained``: the candidates of the search's last round and why none was kept
     not_kept: list[dict[str, Any]] = field(default_factory=list)
     #: candidates refused because their sign makes the motion less stable (free simulation)
@@ -113,7 +118,7 @@ class Diagnosis:
         if self.params:
             out["params"] = self.params
         for key in ("calibration_quality", "model_check", "unexplained", "not_kept",
-                    "alternatives", "non_physical"):
+                    "alternatives", "non_physical", "across_classes"):
             if getattr(self, key):
                 out[key] = getattr(self, key)
         if self.measured_disturbances:
@@ -224,7 +229,7 @@ def _finding_dict(f: Finding) -> dict[str, Any]:
         out["standard_form"] = f.standard_form
     if f.withdrawn:
         out["withdrawn"] = f.withdrawn
-    for key in ("fitted_range", "named_as"):
+    for key in ("fitted_range", "named_as", "between_records"):
         if getattr(f, key):
             out[key] = getattr(f, key)
     return out
