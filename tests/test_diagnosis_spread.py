@@ -111,7 +111,7 @@ def test_a_zigzag_series_of_two_amplitudes_is_grouped_into_its_classes():
 def test_a_correction_that_is_the_truth_holds_across_classes():
     """Zigzags 20/20 and 10/10 of a Nomoto ship with Norrbin's r^3: the diagnosis names it and
     it improves each class fitted on the other; the host model is not blamed."""
-    d = diagnose([zigzag(20, c3=30.0, seed=12), zigzag(10, c3=30.0, seed=13)], "nomoto",
+    d = diagnose([zigzag(20, c3=-30.0, seed=12), zigzag(10, c3=-30.0, seed=13)], "nomoto",
                  calibrate="K,T", method="free")
     assert [(f.effect, f.target) for f in d.findings][:1] == [("nonlinear_damping", "r")]
     across = d.across_classes

@@ -54,12 +54,15 @@ SPAN = 2.0
 
 # -- pieces ---------------------------------------------------------------------------------------
 def pieces(series: Series, count: int = PIECES) -> list[tuple[str, Series]]:
-    """Per record of a series, a one-record series (same scales and steps); a single record
-    cut into ``count`` consecutive pieces at equal ratios of its amplitude envelope (in time
-    when the envelope spans less than :data:`SPAN`), each named by its time span."""
-    if len(series.runs) > 1:
-        return [(run.name or f"record {k + 1}", replace(series, runs=[run]))
-                for k, run in enumerate(series.runs)]
+    """Per record of a series, a one-record series (same scales and steps; a record cut into
+    windows keeps its windows together, :meth:`Series.folds`); a single record cut into
+    ``count`` consecutive pieces at equal ratios of its amplitude envelope (in time when the
+    envelope spans less than :data:`SPAN`), each named by its time span."""
+    folds = series.folds()
+    if len(folds) > 1:
+        return [(series.runs[fold[0]].name or f"record {k + 1}",
+                 replace(series, runs=[series.runs[i] for i in fold]))
+                for k, fold in enumerate(folds)]
     run = series.runs[0]
     cuts = _cuts(run.y / series.scale, run.time, count)
     out = []
@@ -98,7 +101,7 @@ def between_records(comparison: Comparison) -> dict[str, Any]:
     refits = [_refit(structure, final, part) for _, part in parts]
     names = [name for name, _ in parts]
     method = (f"the final model refitted whole on each of the {len(parts)} records alone"
-              if len(comparison.series.runs) > 1 else
+              if len(comparison.series.folds()) > 1 else
               f"the final model refitted whole on {len(parts)} consecutive pieces of the record "
               "(cut at equal ratios of its amplitude envelope)")
     whole = coefficients(final)
@@ -128,11 +131,19 @@ def record_spread(value: float, values: Sequence[float]) -> float:
 
 
 def _refit(structure: Structure, whole: Fit, part: Series) -> Fit:
-    """``structure``'s model and terms fitted on ``part`` alone, from the whole fit's values."""
+    """``structure``'s model and terms fitted on ``part`` alone, from the whole fit's values
+    (and its fitted initial states for the runs ``part`` shares with it: a window's start is
+    not its first sample where states are unmeasured)."""
     own = Structure(part, structure.names, structure.terms, structure.inputs)
     labels = structure.labels()
     start = {label: float(whole.theta[labels.index(label)])
              for label in (*structure.names, *(term_label(t) for t in structure.terms))}
+    states = [part.model.state_names[i] for i in structure.free_states]
+    for j, run in enumerate(part.runs):
+        k = next((i for i, r in enumerate(structure.series.runs) if r is run), None)
+        if k is not None:
+            start |= {f"{s}0[{j}]": float(whole.theta[labels.index(f"{s}0[{k}]")])
+                      for s in states}
     return fit(own, all_rows(part), own.start(start))
 
 
@@ -195,7 +206,7 @@ def _swaps(comparison: Comparison, parts: Sequence[tuple[str, Series]],
                 better.append(name)
         if better:
             chosen_label, rival_label = chosen.candidate.label, rival.candidate.label
-            whole = "the whole series" if len(comparison.series.runs) > 1 else "the whole record"
+            whole = "the whole series" if len(comparison.series.folds()) > 1 else "the whole record"
             out.append({"chosen": chosen_label, "rival": rival_label, "rival_better_on": better,
                         "sentence": f"{_term_name(rival)} on {', '.join(better)}, "
                         f"{_term_name(chosen)} on {whole}: the data do not tell them apart"})
@@ -372,6 +383,8 @@ def across_classes(comparison: Comparison, tolerance: float = CLASS_TOLERANCE,
     richer model, with the parameters to calibrate on the training classes); empty when the
     series spans fewer than two classes or nothing was corrected."""
     series = comparison.series
+    if any(run.record is not None for run in series.runs):
+        return {}  # windows of records, not manoeuvres: no amplitude class to read
     classes = amplitude_classes(series, tolerance)
     if len(classes) < 2 or not comparison.accepted:
         return {}
