@@ -32,6 +32,7 @@ from marine_envs.models.effects import Effect
 
 from .comparison import Comparison, Scored, all_rows, extend
 from .output_error import Fit, Series, Structure, fit, term_label
+from .ranges import standard_form
 from .residuals import displacements
 from .result import Finding
 
@@ -157,11 +158,10 @@ def coefficients(result: Fit) -> dict[str, tuple[float, float]]:
     targets = sorted({t.target for t in structure.terms if t.kind == "state"})
     if not targets:
         return out
-    from .free_simulation import standard_form  # the diagnosis's own form (it imports us)
-
     form = {t: standard_form(result, t) for t in targets}
-    covariance = np.outer(result.std[:k_end], result.std[:k_end]) * \
-        result.correlation[:k_end, :k_end]
+    with np.errstate(invalid="ignore"):  # an unidentified unknown's inf std: made 0 below
+        covariance = np.outer(result.std[:k_end], result.std[:k_end]) * \
+            result.correlation[:k_end, :k_end]
     for target in targets:
         derivative = _form_derivative(result, target, k_end)
         for key, value in form[target].items():
