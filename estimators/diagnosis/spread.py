@@ -28,7 +28,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from marine_envs.models import get_model
 from marine_envs.models.effects import Effect
+from marine_envs.recording import Recording
 
 from .comparison import Comparison, Scored, all_rows, extend
 from .output_error import Fit, Series, Structure, fit, term_label
@@ -373,15 +375,40 @@ def _class_label(series: Series, amplitude: dict[str, float]) -> str:
 def richer_models(series: Series) -> tuple[str, ...]:
     """The richer host models the series' model declares (``richer_models`` ClassVar, e.g.
     ``("mmg",)`` on ``nomoto``): names a caller may validate with :func:`across_classes`."""
-    return tuple(getattr(type(series.model), "richer_models", ()))
+    return tuple(series.model.richer_models)
+
+
+def richer_series(series: Series) -> list[tuple[Series, tuple[str, ...]]]:
+    """The series re-read by each richer host its model declares (:func:`richer_models`), with
+    the parameters to calibrate on the training classes (the richer model's
+    ``calibration_candidates``): the shared inputs as recorded, the others held at the richer
+    model's nominal input (e.g. the propeller speed of a zigzag), the shared channels measured."""
+    out = []
+    for name in richer_models(series):
+        model = get_model(name)
+        shared = [c for c in series.channels if c in model.output_names]
+        records = []
+        for run in series.runs:
+            u = np.tile(model.u0, (len(run.time), 1))
+            for j, input_name in enumerate(series.model.input_names):
+                if input_name in model.input_names:
+                    u[:, model.input_names.index(input_name)] = run.u[:, j]
+            measured = {c: run.y[:, series.channels.index(c)] for c in shared}
+            records.append(Recording.from_arrays(name, run.time, u, measured,
+                                                 meta={"name": run.name}))
+        names = tuple(model.calibration_candidates)
+        out.append((Series.from_recordings(records, model, names), names))
+    return out
 
 
 def across_classes(comparison: Comparison, tolerance: float = CLASS_TOLERANCE,
-                   richer: Sequence[tuple[Series, Sequence[str]]] = ()) -> dict[str, Any]:
+                   richer: Sequence[tuple[Series, Sequence[str]]] | None = None
+                   ) -> dict[str, Any]:
     """Leave one amplitude class out (module doc), for the nominal-calibrated and the corrected
     model and each ``richer`` host (the same records, in the same order, as a series of the
-    richer model, with the parameters to calibrate on the training classes); empty when the
-    series spans fewer than two classes or nothing was corrected."""
+    richer model, with the parameters to calibrate on the training classes; None: those the
+    model declares, :func:`richer_series`); empty when the series spans fewer than two classes
+    or nothing was corrected."""
     series = comparison.series
     if any(run.record is not None for run in series.runs):
         return {}  # windows of records, not manoeuvres: no amplitude class to read
@@ -389,6 +416,7 @@ def across_classes(comparison: Comparison, tolerance: float = CLASS_TOLERANCE,
     if len(classes) < 2 or not comparison.accepted:
         return {}
     nominal, final = comparison.nominal, comparison.final
+    richer = richer_series(series) if richer is None else richer
     hosts = [Structure(host, tuple(names)) for host, names in richer]
     channel = _headline(series)
     rows = []

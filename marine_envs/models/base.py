@@ -76,6 +76,9 @@ class VehicleModel(ABC):
     #: Parameters known only roughly (fitted, estimated), which a diagnosis may calibrate by
     #: itself when free simulation cannot follow the records; empty: any parameter may be.
     calibration_candidates: ClassVar[tuple[str, ...]] = ()
+    #: Richer host models of the same records (e.g. ``nomoto``'s ``("mmg",)``), which a
+    #: diagnosis validates across amplitude classes when this model's corrections do not hold.
+    richer_models: ClassVar[tuple[str, ...]] = ()
 
     @property
     def actuator_names(self) -> tuple[str, ...]:

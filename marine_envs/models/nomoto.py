@@ -77,6 +77,7 @@ class NomotoModel(VehicleModel):
     #: ``rhs`` reads K, T, delta0 at call time with numpy arithmetic: one value per row works.
     row_parameters: ClassVar[bool] = True
     lag_parameters: ClassVar[tuple[str, str]] = ("K", "T")
+    richer_models: ClassVar[tuple[str, ...]] = ("mmg",)
     equations: ClassVar[Equations] = Equations(nomoto_rhs)
 
     def __init__(self, params: NomotoParams | None = None) -> None:
