@@ -22,6 +22,9 @@ model tests (decays, zigzags, lab runs, series of them), judged in free simulati
 * :mod:`.output_error` - recordings on the model's bandwidth, batched free simulations, fits;
 * :mod:`.comparison` - nested models refitted whole and compared on held-out data;
 * :mod:`.spread` - the coefficients' spread between records, validation across amplitude classes;
+* :mod:`.ranges` - a finding's fitted range, non-physical signs, the offset a constant force is;
+* :mod:`.self_calibration` - records the model cannot follow whole: windows, parameters chosen;
+* :mod:`.validation` - a diagnosis's models predicting other tests (``marine validate``);
 * :mod:`.free_simulation` - the diagnosis of a series; :mod:`.free_simulation_report` and
   :mod:`.free_simulation_figures` its report;
 
