@@ -394,6 +394,7 @@ def across_classes_lines(diagnosis: Diagnosis) -> list[str]:
     if not across:
         return []
     channel = across["channel"]
+    key = "rerun_rmse" if across.get("judged") == "re-run" else "rmse"  # what was judged
     unit = _units(diagnosis).get(channel, "")
     factor, shown = display_unit(unit)
     correction = ", ".join(f"`{f.effect}` on `{f.target}`" for f in diagnosis.findings) \
@@ -403,16 +404,16 @@ def across_classes_lines(diagnosis: Diagnosis) -> list[str]:
            "", "| held-out class | records | fitted on | nominal-calibrated | corrected | cut |",
            "| --- | --- | --- | ---: | ---: | ---: |"]
     for row in across["classes"]:
-        before = row["nominal"]["rmse"][channel] * factor
-        after = row["corrected"]["rmse"][channel] * factor
+        before = row["nominal"][key][channel] * factor
+        after = row["corrected"][key][channel] * factor
         out.append(f"| {cell(row['class'])} | {cell(', '.join(row['records']))} | "
                    f"{cell(_listed(row['fitted_on']))} | {before:.3g} | {after:.3g} | "
                    f"{'diverged' if row['corrected']['diverged'] else format(row['cut'], '.0%')} |")
     out.append("")
     for row in across["classes"]:
         if row["worse"]:
-            before = row["nominal"]["rmse"][channel] * factor
-            after = row["corrected"]["rmse"][channel] * factor
+            before = row["nominal"][key][channel] * factor
+            after = row["corrected"][key][channel] * factor
             out.append(f"- Fitted on {_listed(row['fitted_on'])}, {correction} makes the "
                        f"{row['class']} test worse: {before:.3g} -> {after:.3g} {shown}.")
     tried = across.get("richer", {})

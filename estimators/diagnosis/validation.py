@@ -30,7 +30,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -57,7 +57,7 @@ from marine_envs.models.effects import (
 from marine_envs.models.integrate import rk4
 from marine_envs.recording import Recording, read_recording
 
-from .output_error import _model_bandwidth
+from .output_error import Structure, _model_bandwidth
 from .ranges import outside_range
 
 #: The two models of a diagnosis, in the table's order.
@@ -120,6 +120,36 @@ def read_host(document: Mapping[str, Any] | str | Path) -> Host:
     return Host(base.name, {MODELS[0]: calibrated, MODELS[1]: corrected},
                 tuple(e for e in effects if e.kind == "input"),
                 tuple(e for e in effects if e.kind == "output"), ranged)
+
+
+def fitted_host(structure: Structure, theta: np.ndarray) -> Host:
+    """The model of a free-simulation fit (its calibrated values, its terms at their fitted
+    coefficients, its input effects) as a :class:`Host` whose two models are that one."""
+    base, n = structure.series.model, len(structure.names)
+    model = base.with_params(**{name: float(theta[k]) for k, name in
+                                enumerate(structure.names)}) if n else base
+    terms = [replace(t, parameters={**t.parameters, "b" if "b" in t.parameters else "c":
+                                    float(theta[n + j])}) for j, t in enumerate(structure.terms)]
+    state = [t for t in terms if t.kind == "state"]
+    corrected = ModelWithEffects(model, state) if state else model
+    return Host(base.name, dict.fromkeys(MODELS, corrected), tuple(structure.inputs),
+                tuple(t for t in terms if t.kind == "output"))
+
+
+def rerun_from_fit(structure: Structure, theta: np.ndarray, run: int) -> dict[str, float] | None:
+    """Run ``run`` of a fit's series re-run as its zig-zag by the fitted model (:func:`_rerun`):
+    RMS error per angle channel, rad; None when the run is no zig-zag or lacks the rudder or
+    heading a re-run needs."""
+    series, data = structure.series, structure.series.runs[run]
+    host = fitted_host(structure, theta)
+    rec = Recording.from_arrays(host.name, data.time, data.u,
+                                {c: data.y[:, j] for j, c in enumerate(series.channels)},
+                                meta={"name": data.name})
+    try:
+        check = _read(host, rec, "zigzag")
+    except ValueError:
+        return None
+    return _rerun(host, MODELS[1], check, "zigzag").rms
 
 
 # -- the results ----------------------------------------------------------------------------------
