@@ -384,6 +384,12 @@ def case_zigzag(shared: Path, notes: list[str]) -> list[dict[str, Any]]:
         return []
     recordings = [read_hsva_zigzag(p) for p in paths]
     rows = [run_diagnosis("zigzag-series", recordings, "nomoto", "K,T", "free")]
+    small = shared / ZIGZAG_DIR / ZIGZAG_CLASSES[-1]
+    if small.is_file():  # the four amplitude classes: does the correction hold across them?
+        rows.append(run_diagnosis("zigzag-series, four classes",
+                                  [*recordings, read_hsva_zigzag(small)], "nomoto", "K,T",
+                                  "free"))
+    notes += [line for row in rows for line in _across_notes(row)]
     rows += [run_diagnosis(f"zigzag {p.stem.split('_Z_')[1]} alone", [rec], "nomoto", "K,T",
                            "free") for p, rec in zip(paths, recordings, strict=True)]
     start = time.perf_counter()
@@ -400,6 +406,26 @@ def case_zigzag(shared: Path, notes: list[str]) -> list[dict[str, Any]]:
     notes.append(f"  mean cut {np.mean([item['cut'] for item in loo]):.0%} (the issue quotes "
                  "linear 12-30 deg off, Norrbin cuts 14/78/55 %)")
     return rows
+
+
+def _across_notes(row: dict[str, Any]) -> list[str]:
+    """The diagnosis's own leave-one-amplitude-class-out validation, in lines."""
+    across = row.get("diagnosis", {}).get("across_classes") or {}
+    if not across:
+        return []
+    key = "rerun_rmse" if across.get("judged") == "re-run" else "rmse"
+    lines = [f"{row['case']}: across amplitude classes ({across['judged']}), heading RMS "
+             "nominal-calibrated -> corrected" + (", richer hosts" if across.get("richer")
+                                                   else "") + ":"]
+    for c in across["classes"]:
+        richer = ", ".join(f"{name} {math.degrees(v[key]['psi']):.2f}"
+                           for name, v in c.get("richer", {}).items() if key in v)
+        lines.append(f"  {c['class']}: {math.degrees(c['nominal'][key]['psi']):.2f} -> "
+                     f"{math.degrees(c['corrected'][key]['psi']):.2f} deg"
+                     + (f"; {richer} deg" if richer else "") + (" (worse)" if c["worse"] else ""))
+    lines += [f"  {text}" for text in (across.get("verdict"), *across.get("richer", {}).values())
+              if text]
+    return lines
 
 
 def case_hovercraft(shared: Path, notes: list[str]) -> list[dict[str, Any]]:
