@@ -514,8 +514,8 @@ def class_error(structure: Structure, theta: FloatArray, held: Sequence[int]) ->
 
 
 def rerun_error(structure: Structure, theta: FloatArray, run: int) -> dict[str, float] | None:
-    """Run ``run``'s zig-zag re-run closed loop (:func:`.validation.rerun`: rudder to the
-    record's amplitude, reversed where the *predicted* heading reaches its check) by the model
+    """Run ``run``'s zig-zag re-run closed loop (:func:`.validation.rerun_from_fit`: rudder to
+    the record's amplitude, reversed where the *predicted* heading reaches its check) by the model
     of ``structure`` at ``theta``: RMS per angle channel against the record, rad; None when the
     run is no zig-zag. A course-unstable ship replayed open loop drifts from any error; run as
     a zig-zag, it is steered as in the test."""

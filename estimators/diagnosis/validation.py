@@ -137,9 +137,9 @@ def fitted_host(structure: Structure, theta: np.ndarray) -> Host:
 
 
 def rerun_from_fit(structure: Structure, theta: np.ndarray, run: int) -> dict[str, float] | None:
-    """Run ``run`` of a fit's series re-run as its zig-zag by the fitted model (:func:`_rerun`):
-    RMS error per angle channel, rad; None when the run is no zig-zag or lacks the rudder or
-    heading a re-run needs."""
+    """Run ``run`` of a fit's series re-run as its zig-zag by the fitted model (as ``marine
+    validate`` re-runs a record): RMS error per angle channel, rad; None when the run is no
+    zig-zag or lacks the rudder or heading a re-run needs."""
     series, data = structure.series, structure.series.runs[run]
     host = fitted_host(structure, theta)
     rec = Recording.from_arrays(host.name, data.time, data.u,
