@@ -484,7 +484,8 @@ def _richer_verdict(rows: Sequence[dict[str, Any]], channel: str,
 def class_error(structure: Structure, theta: FloatArray, held: Sequence[int]) -> dict[str, Any]:
     """``structure`` fitted (from ``theta``) on every record but ``held``, then free-simulating
     each held record (its own initial states fitted): RMS per channel (model units) and the
-    mean square in signal scales (runs alike)."""
+    mean square in signal scales (runs alike); for zig-zags also ``rerun_rmse``, each held
+    record re-run as its zig-zag (:func:`.validation.rerun_from_fit`), rad."""
     series = structure.series
     own = np.concatenate([_states_of(structure, r) for r in held]).astype(int)
     rows: list[Any] = all_rows(series)
@@ -506,20 +507,13 @@ def class_error(structure: Structure, theta: FloatArray, held: Sequence[int]) ->
     out = {"rmse": rmse, "diverged": diverged,
            "mean_square": math.inf if diverged else float(np.mean([np.mean(e**2)
                                                                     for e in errors]))}
-    rerun = [rerun_error(structure, trained, r) for r in held]
-    if all(e is not None for e in rerun):  # zig-zags: also judged as they are run
+    # zig-zags are also judged as they are run: steered closed loop, a course-unstable ship
+    # does not drift from a small error as it does replayed open loop
+    rerun = [rerun_from_fit(structure, trained, r) for r in held]
+    if all(e is not None for e in rerun):
         out["rerun_rmse"] = {c: float(np.sqrt(np.mean([e[c] ** 2 for e in rerun])))
                              for c in rerun[0]}
     return out
-
-
-def rerun_error(structure: Structure, theta: FloatArray, run: int) -> dict[str, float] | None:
-    """Run ``run``'s zig-zag re-run closed loop (:func:`.validation.rerun_from_fit`: rudder to
-    the record's amplitude, reversed where the *predicted* heading reaches its check) by the model
-    of ``structure`` at ``theta``: RMS per angle channel against the record, rad; None when the
-    run is no zig-zag. A course-unstable ship replayed open loop drifts from any error; run as
-    a zig-zag, it is steered as in the test."""
-    return rerun_from_fit(structure, theta, run)
 
 
 def _states_of(structure: Structure, run: int) -> NDArray[np.int_]:
