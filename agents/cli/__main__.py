@@ -1,0 +1,7 @@
+"""``python -m agents.cli``: the ``marine`` command."""
+
+import sys
+
+from . import main
+
+sys.exit(main())
