@@ -216,7 +216,7 @@ def _batched(policy: str | Callable[[Any], Any]) -> str | Callable[[Any], Any]:
         name = canonical(policy)
         if POLICIES[name].batched:
             return name
-    allowed = ", ".join(repr(name) for name in names(batched=True))
+    allowed = ", ".join(repr(name) for name in sorted(names(batched=True)))
     raise ValueError(f"policy={policy!r} is invalid: {allowed} or a factory")
 
 

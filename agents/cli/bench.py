@@ -108,8 +108,8 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
 
 def handle(args: argparse.Namespace) -> int:
     from ..benchmark import Grid, markdown_summary, run_grid, write_outputs, write_report
-    from .benchmark.grid import cell_key
-    from .benchmark.run import load_rows
+    from ..benchmark.grid import cell_key
+    from ..benchmark.run import load_rows
 
     chosen = {k: tuple(v) if isinstance(v, list) else v for k, v in vars(args).items()
               if k in GRID_OPTIONS and v is not None}
