@@ -29,6 +29,7 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
     from estimators import registry
 
     from ..episode import EPISODE_ESTIMATORS, EPISODE_POLICIES
+
     episode = commands.add_parser(
         "episode", help="run one episode of any environment; print RMS errors, plot it",
         description="Run one episode of an environment and print its return and the RMS error "

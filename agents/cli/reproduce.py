@@ -6,20 +6,13 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import (
-    DEBUG,
-    FORCE,
-    JSON,
-    distinct,
-    output_file,
-    plot_path,
-    write_json_output,
-)
+from .common import DEBUG, FORCE, JSON, distinct, output_file, plot_path, write_json_output
 
 
 def add_parser(commands: Any) -> argparse.ArgumentParser:
     """Add ``marine reproduce`` to ``commands`` (the subparsers of ``marine``)."""
     from ..reproduce import REPRODUCTIONS
+
     reproduce = commands.add_parser(
         "reproduce", help="re-run a source document's experiment and compare with its numbers",
         description="Re-run an experiment of the source documents: the document's own settings "

@@ -27,6 +27,7 @@ from .common import (
 def add_parser(commands: Any) -> argparse.ArgumentParser:
     """Add ``marine simulate`` to ``commands`` (the subparsers of ``marine``)."""
     from ..simulate import POLICIES
+
     sim = commands.add_parser(
         "simulate", help="record an episode (CSV or Parquet) in the recording format",
         description="Run an environment under an excitation signal or LQR and record time, "

@@ -8,15 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .common import (
-    DEBUG,
-    FORCE,
-    SEED,
-    check_estimator,
-    env_id,
-    output_dir,
-    positive_int,
-)
+from .common import DEBUG, FORCE, SEED, check_estimator, env_id, output_dir, positive_int
 
 #: ``marine train``'s algorithms and backends: agents.sb3's ALGOS and BACKENDS, named here so
 #: that the parser (``--help``, ``--version``, any command) does not import torch.
