@@ -51,7 +51,7 @@ Angles on the command line are in degrees; everything inside (and in recordings)
 """
 
 #: The commands, in the order ``marine --help`` lists them: each module's ``add_parser`` adds
-#: the command's parser (its ``run`` default is the handler).
+#: the command's parser, its ``handle`` runs the command.
 COMMANDS = (demo, simulate, episode, reproduce, diagnose, validate, train, evaluate, bench, envs)
 
 
@@ -64,7 +64,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"marine-envs {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for command in COMMANDS:
-        command.add_parser(commands)
+        added = command.add_parser(commands)
+        if added.get_default("run") is None:  # (train's handler takes its parser too)
+            added.set_defaults(run=command.handle)
     return parser
 
 

@@ -13,17 +13,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .common import (
-    DEBUG,
-    FORCE,
-    JSON,
-    check_estimator,
-    distinct,
-    output_dir,
-    output_file,
-    positive_float,
-    positive_int,
-)
+from . import common
 
 DESCRIPTION = """\
 Run a grid of vehicles x estimators x sea states x sensor degradations x controllers x seeds.
@@ -62,8 +52,9 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
         "bench", help="estimator x controller benchmark grid over vehicles, seas and sensors",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description=DESCRIPTION,
-        parents=[DEBUG, JSON, FORCE],
-        option_help={"json": 'also write {"rows": [...]} as JSON',
+        parents=[common.DEBUG, common.JSON, common.FORCE, common.QUIET],
+        option_help={"quiet": "no progress bars",
+                     "json": 'also write {"rows": [...]} as JSON',
                      "force": "start afresh: clear what an earlier run wrote into --out, and "
                             "replace --json and --report"})
     axes = bench.add_argument_group("the grid (each a space-separated list)")
@@ -80,11 +71,11 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
                       help="default, or degradations kind=level joined by +: noise=K (K x the "
                            "default noise), quant=K (a step of K default stds), dropout=P, "
                            "delay=N (control periods); e.g. default noise=4 dropout=0.2")
-    axes.add_argument("--seeds", type=positive_int,
+    axes.add_argument("--seeds", type=common.positive_int,
                       help="episodes per cell, seeds 0..N-1 (default 5)")
-    axes.add_argument("--seconds", type=positive_float,
+    axes.add_argument("--seconds", type=common.positive_float,
                       help="episode length, s (default: the env's)")
-    axes.add_argument("--timesteps", type=positive_int,
+    axes.add_argument("--timesteps", type=common.positive_int,
                       help="training steps of each agent the grid trains (default 100000)")
     bench.add_argument("--quick", action="store_true",
                        help="a small grid over all five vehicles: true raw kf akf, lqr and ppo, "
@@ -97,12 +88,10 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
                        help="local processes (default) or Ray tasks")
     bench.add_argument("--address", help="Ray cluster address (auto, or HOST:PORT); without it "
                                          "--backend ray starts a local Ray")
-    bench.add_argument("--workers", type=positive_int, default=os.cpu_count() or 1,
+    bench.add_argument("--workers", type=common.positive_int, default=os.cpu_count() or 1,
                        help="processes (local) or CPUs of the local Ray (default: all cores)")
     bench.add_argument("--report", metavar="DIR",
                        help="also write DIR/index.html: the tables and figures in one page")
-    bench.add_argument("--quiet", action="store_true", help="no progress bars")
-    bench.set_defaults(run=handle)
     return bench
 
 
@@ -115,7 +104,7 @@ def handle(args: argparse.Namespace) -> int:
               if k in GRID_OPTIONS and v is not None}
     grid = dataclasses.replace(Grid.quick(), **chosen) if args.quick else Grid(**chosen)
     for name in grid.estimators:
-        check_estimator(name, "--estimators")
+        common.check_estimator(name, "--estimators")
     if args.backend == "ray" and importlib.util.find_spec("ray") is None:
         raise ImportError("--backend ray needs Ray: pip install \"marine-envs[ray]\"")
     for controller in grid.controllers:
@@ -126,17 +115,17 @@ def handle(args: argparse.Namespace) -> int:
     out = Path(args.out)
     resuming = (out / "grid.json").is_file() and not args.force  # a rerun resumes (documented)
     if not resuming:
-        output_dir(args.out, args.force, "--out", _bench_owned, " (without its grid.json)")
+        common.output_dir(args.out, args.force, "--out", _bench_owned, " (without its grid.json)")
     # resuming, the grid's own summaries inside --out (e.g. --report bench/report) are redone
     def own(path: str | None) -> bool:
         return resuming and path is not None and out.resolve() in Path(path).resolve().parents
 
-    json_out = output_file(args.json, args.force or own(args.json), "--json", creates=out)
-    report = None if args.report is None else output_dir(
+    json_out = common.output_file(args.json, args.force or own(args.json), "--json", creates=out)
+    report = None if args.report is None else common.output_dir(
         args.report, args.force or own(args.report), "--report",
         lambda d: ["index.html"] if (d / "index.html").exists() else [])
-    distinct(("--json", json_out), *(("--out", out / name) for name in BENCH_OWNED),
-             ("--report", None if report is None else report / "index.html"))
+    common.distinct(("--json", json_out), *(("--out", out / name) for name in BENCH_OWNED),
+                    ("--report", None if report is None else report / "index.html"))
     if resuming:
         before = json.loads((out / "grid.json").read_text())
         if before != json.loads(json.dumps(grid.settings())):

@@ -1,7 +1,7 @@
 """What every ``marine`` command shares: the argument types, the shared options (one parent
-parser each: :data:`DEBUG`, :data:`SEED`, :data:`JSON`, :data:`FORCE`, :data:`ENV_KWARGS`), the
-checks of outputs and inputs before any work, and the :class:`Parser` that reports a mistake on
-one line."""
+parser each: :data:`DEBUG`, :data:`SEED`, :data:`JSON`, :data:`FORCE`, :data:`ENV_KWARGS`,
+:data:`QUIET`), the checks of outputs and inputs before any work, and the :class:`Parser` that
+reports a mistake on one line."""
 
 from __future__ import annotations
 
@@ -277,5 +277,8 @@ FORCE = _shared("--force", action="store_true", help="replace existing outputs")
 #: ``--env-kwargs JSON``: the environment's arguments, a JSON object.
 ENV_KWARGS = _shared("--env-kwargs", metavar="JSON", type=json_object,
                      help="environment arguments, SI units, a JSON object")
+#: ``--quiet``: no progress bar.
+QUIET = _shared("--quiet", action="store_true", help="no progress bar")
 #: The shared options by destination.
-SHARED = {"debug": DEBUG, "seed": SEED, "json": JSON, "force": FORCE, "env_kwargs": ENV_KWARGS}
+SHARED = {"debug": DEBUG, "seed": SEED, "json": JSON, "force": FORCE, "env_kwargs": ENV_KWARGS,
+          "quiet": QUIET}

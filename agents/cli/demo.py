@@ -6,40 +6,35 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import (
-    DEBUG,
-    FORCE,
-    JSON,
-    SEED,
-    distinct,
-    output_file,
-    plot_path,
-    positive_float,
-    write_json_output,
-)
+from . import common
 
 DEMO_PLOT = "marine_demo.png"
+
+
+#: The command's description in its help (argparse fills the lines anew).
+DESCRIPTION = """\
+Simulate the USV in a stern-quartering random sea with the rudder fixed and with a discrete LQR
+autopilot acting on the noisy, quantized sensors; print RMS heading, roll and rudder and the
+episode returns; write a plot.
+"""
 
 
 def add_parser(commands: Any) -> argparse.ArgumentParser:
     """Add ``marine demo`` to ``commands`` (the subparsers of ``marine``)."""
     demo = commands.add_parser(
         "demo", help="a short USV episode: rudder fixed vs LQR; prints a table, writes a plot",
-        description="Simulate the USV in a stern-quartering random sea with the rudder fixed and "
-                    "with a discrete LQR autopilot acting on the noisy, quantized sensors; print "
-                    "RMS heading, roll and rudder and the episode returns; write a plot.",
-        parents=[DEBUG, SEED, JSON, FORCE],
+        description=DESCRIPTION,
+        parents=[common.DEBUG, common.SEED, common.JSON, common.FORCE],
         option_help={"seed": "episode seed (0)",
                      "json": "also write the summary as JSON",
                      "force": "replace existing outputs"})
-    demo.add_argument("--seconds", type=positive_float, default=100.0,
+    demo.add_argument("--seconds", type=common.positive_float, default=100.0,
                       help="episode length, s (100)")
-    demo.add_argument("--hs", type=positive_float, default=2.0,
+    demo.add_argument("--hs", type=common.positive_float, default=2.0,
                       help="significant wave height, m (2.0)")
     demo.add_argument("--plot", help=f"figure path (default {DEMO_PLOT}, the demo's own: "
                                      "rewritten; another existing file needs --force)")
     demo.add_argument("--no-plot", action="store_true", help="do not write a figure")
-    demo.set_defaults(run=handle)
     return demo
 
 
@@ -49,9 +44,10 @@ def handle(args: argparse.Namespace) -> int:
     seed = 0 if args.seed is None else args.seed  # --seed's default here
     plot = None
     if not args.no_plot:  # the demo's own figure is rewritten; a path the user names is kept
-        plot = plot_path(args.plot, args.force) if args.plot else plot_path(DEMO_PLOT, True)
-    out = output_file(args.json, args.force, "--json")
-    distinct(("--plot", plot), ("--json", out))
+        plot = common.plot_path(args.plot, args.force) if args.plot else \
+            common.plot_path(DEMO_PLOT, True)
+    out = common.output_file(args.json, args.force, "--json")
+    common.distinct(("--plot", plot), ("--json", out))
     summary = run_demo(seconds=args.seconds, seed=seed, hs=args.hs, plot=plot)
     print(f"USV-v0, Hs = {args.hs} m, stern-quartering sea, {args.seconds:g} s, seed {seed}")
     print(format_table(summary))
@@ -59,5 +55,5 @@ def handle(args: argparse.Namespace) -> int:
           "(rudder-roll stabilisation) while holding the course.")
     if plot is not None:
         print(f"plot written to {plot}")
-    write_json_output(out, summary)
+    common.write_json_output(out, summary)
     return 0

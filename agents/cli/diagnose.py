@@ -9,17 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .common import (
-    DEBUG,
-    FORCE,
-    JSON,
-    distinct,
-    finite_float,
-    output_dir,
-    output_file,
-    positive_int,
-    progress_bar,
-)
+from . import common
 
 DESCRIPTION = """\
 Diagnose why a vehicle model and recordings of the vehicle disagree. Prints a summary and the
@@ -74,7 +64,7 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
     diagnose = commands.add_parser(
         "diagnose", help="find why a model and a recording disagree: which physics it lacks",
         description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
-        parents=[DEBUG, JSON, FORCE],
+        parents=[common.DEBUG, common.JSON, common.FORCE, common.QUIET],
         option_help={"json": "write the diagnosis as JSON",
                      "force": "replace an existing --json, or the report (and every figure) "
                                "in --report"})
@@ -97,15 +87,13 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
     cut = diagnose.add_argument_group(
         "long records (the expected run time is printed first; a seaway record takes about "
         "1 ms per sample)")
-    cut.add_argument("--start", type=finite_float, metavar="SECONDS",
+    cut.add_argument("--start", type=common.finite_float, metavar="SECONDS",
                      help="diagnose from this time on (the record's own clock, s)")
-    cut.add_argument("--stop", type=finite_float, metavar="SECONDS",
+    cut.add_argument("--stop", type=common.finite_float, metavar="SECONDS",
                      help="diagnose up to this time (s)")
-    cut.add_argument("--decimate", type=positive_int, default=1, metavar="K",
+    cut.add_argument("--decimate", type=common.positive_int, default=1, metavar="K",
                      help="keep every K-th sample (no filtering: keep the new rate well above "
                           "the vehicle's bandwidth); default 1")
-    diagnose.add_argument("--quiet", action="store_true", help="no progress bar")
-    diagnose.set_defaults(run=handle)
     return diagnose
 
 
@@ -114,13 +102,13 @@ def handle(args: argparse.Namespace) -> int:
     from estimators.diagnosis.api import expected_seconds, read_params
     from estimators.diagnosis.report import OWNED, owned_files
 
-    out = output_file(args.json, args.force, "--json")
-    report = None if args.report is None else output_dir(
+    out = common.output_file(args.json, args.force, "--json")
+    report = None if args.report is None else common.output_dir(
         args.report, args.force, "--report", lambda d: [p.name for p in owned_files(d)],
         " (an earlier report)")
     if report is not None:
-        distinct(("--json", out), *(("--report", report / name) for name in OWNED
-                                    if "*" not in name))
+        common.distinct(("--json", out), *(("--report", report / name) for name in OWNED
+                                           if "*" not in name))
     params = read_params(args.params) if args.params else None
     recordings = _read_recordings(args)  # warnings of implausible units are printed here
     if args.calibrate:
@@ -141,7 +129,7 @@ def handle(args: argparse.Namespace) -> int:
             f"expected run time {_duration(seconds)} to {_duration(3 * seconds)}")
         + ("" if seconds is None or seconds < 20 else
            "; --decimate K or --start/--stop SECONDS cut it"))
-    with progress_bar(1, "diagnosing", not args.quiet) as bar:
+    with common.progress_bar(1, "diagnosing", not args.quiet) as bar:
         def stage(name: str, index: int, total: int) -> None:
             if bar is not None:
                 bar.total = total

@@ -6,14 +6,13 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import DEBUG
+from . import common
 
 
 def add_parser(commands: Any) -> argparse.ArgumentParser:
     """Add ``marine envs`` to ``commands`` (the subparsers of ``marine``)."""
     envs = commands.add_parser("envs", help="list the environments with their spaces",
-                               parents=[DEBUG])
-    envs.set_defaults(run=handle)
+                               parents=[common.DEBUG])
     return envs
 
 

@@ -6,22 +6,14 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import (
-    DEBUG,
-    ENV_KWARGS,
-    FORCE,
-    JSON,
-    SEED,
-    check_env,
-    check_estimator,
-    distinct,
-    env_id,
-    output_file,
-    plot_path,
-    policy_name,
-    positive_float,
-    write_json_output,
-)
+from . import common
+
+#: The command's description in its help (argparse fills the lines anew).
+DESCRIPTION = """\
+Run one episode of an environment and print its return and the RMS error of every state the task
+weighs (angles in degrees); with --plot, draw the true and measured states and the inputs against
+time.
+"""
 
 
 def add_parser(commands: Any) -> argparse.ArgumentParser:
@@ -32,17 +24,15 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
 
     episode = commands.add_parser(
         "episode", help="run one episode of any environment; print RMS errors, plot it",
-        description="Run one episode of an environment and print its return and the RMS error "
-                    "of every state the task weighs (angles in degrees); with --plot, draw the "
-                    "true and measured states and the inputs against time.",
-        parents=[DEBUG, SEED, JSON, FORCE, ENV_KWARGS],
+        description=DESCRIPTION,
+        parents=[common.DEBUG, common.SEED, common.JSON, common.FORCE, common.ENV_KWARGS],
         option_help={"seed": "episode seed (0)",
                      "json": "also write the summary as JSON",
                      "force": "replace existing outputs",
                      "env_kwargs": 'environment arguments, SI units, e.g. \'{"zigzag": "20/20"}\''})
-    episode.add_argument("env", type=env_id, help="environment id, e.g. marine_envs/ROV-v0 "
-                                                  "(or ROV-v0)")
-    episode.add_argument("--policy", type=policy_name, choices=EPISODE_POLICIES,
+    episode.add_argument("env", type=common.env_id,
+                         help="environment id, e.g. marine_envs/ROV-v0 (or ROV-v0)")
+    episode.add_argument("--policy", type=common.policy_name, choices=EPISODE_POLICIES,
                          default="lqr-state",
                          help="lqr-state (LQR on the true state, the default), lqr (on the raw "
                               "sensors), nominal (the nominal input; its old name zero still "
@@ -51,10 +41,9 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
                          help="put an estimator between the sensors and the policy: "
                               f"{registry.describe()}; --policy lqr then acts on the full "
                               "estimated state")
-    episode.add_argument("--seconds", type=positive_float,
+    episode.add_argument("--seconds", type=common.positive_float,
                          help="episode length, s (the env's own)")
     episode.add_argument("--plot", metavar="PNG", help="write a figure of the episode")
-    episode.set_defaults(run=handle)
     return episode
 
 
@@ -62,12 +51,12 @@ def handle(args: argparse.Namespace) -> int:
     from ..episode import run
 
     seed = 0 if args.seed is None else args.seed  # --seed's default here
-    plot = plot_path(args.plot, args.force)
-    out = output_file(args.json, args.force, "--json")
-    distinct(("--plot", plot), ("--json", out))
-    check_estimator(args.estimator)
+    plot = common.plot_path(args.plot, args.force)
+    out = common.output_file(args.json, args.force, "--json")
+    common.distinct(("--plot", plot), ("--json", out))
+    common.check_estimator(args.estimator)
     env_kwargs = args.env_kwargs or {}
-    check_env(args.env, env_kwargs)
+    common.check_env(args.env, env_kwargs)
     summary = run(args.env, policy=args.policy, seconds=args.seconds, seed=seed,
                   env_kwargs=env_kwargs, plot=plot, estimator=args.estimator)
     on = f" on {args.estimator}" if args.estimator else ""
@@ -76,5 +65,5 @@ def handle(args: argparse.Namespace) -> int:
         print(f"  {key:<24}{value:>14.6g}")
     if plot is not None:
         print(f"plot written to {plot}")
-    write_json_output(out, summary)
+    common.write_json_output(out, summary)
     return 0

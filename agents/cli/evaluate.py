@@ -7,16 +7,14 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from .common import (
-    DEBUG,
-    FORCE,
-    JSON,
-    SEED,
-    output_file,
-    positive_int,
-    progress_bar,
-    write_json_output,
-)
+from . import common
+
+#: The command's description in its help (argparse fills the lines anew).
+DESCRIPTION = """\
+Run the agent over seeded episodes behind its training estimator and print the task's quadratic
+cost, failures, RMS errors of the weighted states and inputs (angles in degrees), the fraction of
+saturated steps and the estimator's RMS errors, as mean ± std over the episodes.
+"""
 
 
 def add_parser(commands: Any) -> argparse.ArgumentParser:
@@ -24,21 +22,16 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
     evaluate = commands.add_parser(
         "evaluate", help="evaluate an agent 'marine train' saved: cost and errors over seeded "
                          "episodes",
-        description="Run the agent over seeded episodes behind its training estimator and print "
-                    "the task's quadratic cost, failures, RMS errors of the weighted states and "
-                    "inputs (angles in degrees), the fraction of saturated steps and the "
-                    "estimator's RMS errors, as mean ± std over the episodes.",
-        parents=[DEBUG, SEED, JSON, FORCE],
+        description=DESCRIPTION,
+        parents=[common.DEBUG, common.SEED, common.JSON, common.FORCE, common.QUIET],
         option_help={"seed": "first episode's seed; the others follow (default 0)",
                      "json": "also write {\"rows\": [...]} as JSON",
                      "force": "replace an existing --json"})
     evaluate.add_argument("dir", help="the directory 'marine train --out' wrote (its model.zip, "
                                       "else its latest checkpoint), or a model file in it "
                                       "(e.g. checkpoints/model_8192_steps.zip)")
-    evaluate.add_argument("--episodes", type=positive_int, default=5,
+    evaluate.add_argument("--episodes", type=common.positive_int, default=5,
                           help="episodes (default 5)")
-    evaluate.add_argument("--quiet", action="store_true", help="no progress bar")
-    evaluate.set_defaults(run=handle)
     return evaluate
 
 
@@ -49,13 +42,13 @@ def handle(args: argparse.Namespace) -> int:
     from ..evaluation import episode_steps
 
     seed = 0 if args.seed is None else args.seed  # --seed's default here
-    out = output_file(args.json, args.force, "--json")
+    out = common.output_file(args.json, args.force, "--json")
     saved = sb3.find_agent(Path(args.dir))  # a run folder, a checkpoint or a model file
     config = sb3.read_config(saved.run)
     steps = episode_steps(config["env_id"], config.get("max_episode_steps"))
     print(f"{saved.model}" + (f" ({saved.timesteps} steps)" if saved.timesteps else "")
           + f": {config['env_id']} behind {config.get('estimator') or 'raw'}")
-    with progress_bar(steps, "evaluating", not args.quiet) as bar:
+    with common.progress_bar(steps, "evaluating", not args.quiet) as bar:
         rows = sb3.evaluate(saved.model, args.episodes, seed,
                             progress=None if bar is None else bar.update)
         if bar is not None:
@@ -66,5 +59,5 @@ def handle(args: argparse.Namespace) -> int:
         if key != "seed":
             values = [row[key] for row in rows]
             print(f"  {key:28s} {np.mean(values):12.5g} ± {np.std(values):.3g}")
-    write_json_output(out, {"rows": rows})
+    common.write_json_output(out, {"rows": rows})
     return 0

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from .common import DEBUG, FORCE, JSON, distinct, output_file, plot_path, write_json_output
+from . import common
 
 
 def add_parser(commands: Any) -> argparse.ArgumentParser:
@@ -35,30 +35,28 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
                     "from 5/5, 15/15,\n"
                     "                          25/25 zig-zags vs least squares",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        parents=[DEBUG, JSON, FORCE],
+        parents=[common.DEBUG, common.JSON, common.FORCE, common.QUIET],
         option_help={"json": "write the results as JSON",
                      "force": "replace existing outputs"})
     reproduce.add_argument("name", choices=REPRODUCTIONS, help="the experiment")
     reproduce.add_argument("--quick", action="store_true",
                            help="fewer seeds and a shorter run (seconds, for a smoke test)")
     reproduce.add_argument("--plot", metavar="PNG", help="write the document-style figure")
-    reproduce.add_argument("--quiet", action="store_true", help="no progress bar")
-    reproduce.set_defaults(run=handle)
     return reproduce
 
 
 def handle(args: argparse.Namespace) -> int:
     from ..reproduce import run
 
-    plot = plot_path(args.plot, args.force)
-    out = output_file(args.json, args.force, "--json")
-    distinct(("--plot", plot), ("--json", out))
+    plot = common.plot_path(args.plot, args.force)
+    out = common.output_file(args.json, args.force, "--json")
+    common.distinct(("--plot", plot), ("--json", out))
     result = run(args.name, quick=args.quick, progress=not args.quiet)
     print(result.text)
     if plot is not None:
         result.plot(plot)
         print(f"plot written to {plot}")
     if out is not None:
-        write_json_output(out, result.summary)
+        common.write_json_output(out, result.summary)
         print(f"results written to {out}")
     return 0

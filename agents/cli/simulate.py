@@ -8,20 +8,15 @@ import math
 import sys
 from typing import Any
 
-from .common import (
-    DEBUG,
-    ENV_KWARGS,
-    EXIT_SIGNAL,
-    FORCE,
-    SEED,
-    argument_type,
-    check_env,
-    env_id,
-    fraction,
-    output_file,
-    policy_name,
-    positive_float,
-)
+from . import common
+
+#: The command's description in its help (argparse fills the lines anew).
+DESCRIPTION = """\
+Run an environment under an excitation signal or LQR and record time, commanded inputs and sensor
+outputs (SI units) with the model name and parameters as metadata (an actuator effect of effects=
+acts after the command: --actuator-sensors records what the actuators applied too). The format
+follows the file suffix: .csv (with a .csv.json sidecar) or .parquet (needs pyarrow).
+"""
 
 
 def add_parser(commands: Any) -> argparse.ArgumentParser:
@@ -30,34 +25,29 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
 
     sim = commands.add_parser(
         "simulate", help="record an episode (CSV or Parquet) in the recording format",
-        description="Run an environment under an excitation signal or LQR and record time, "
-                    "commanded inputs and sensor outputs (SI units) with the model name and "
-                    "parameters as metadata (an actuator effect of effects= acts after the "
-                    "command: --actuator-sensors records what the actuators applied too). The "
-                    "format follows the file suffix: .csv (with a .csv.json sidecar) or "
-                    ".parquet (needs pyarrow).",
-        parents=[DEBUG, SEED, FORCE, ENV_KWARGS],
+        description=DESCRIPTION,
+        parents=[common.DEBUG, common.SEED, common.FORCE, common.ENV_KWARGS, common.QUIET],
         option_help={"seed": "episode seed (random if omitted)",
                      "force": "replace an existing --out",
                      "env_kwargs": "environment arguments, SI units, e.g. "
                                    '\'{"hs": 3.0, "tp": 9}\''})
-    sim.add_argument("--env", type=env_id, default="marine_envs/USV-v0",
+    sim.add_argument("--env", type=common.env_id, default="marine_envs/USV-v0",
                      help="environment id (marine_envs/USV-v0, or USV-v0)")
-    sim.add_argument("--steps", type=argument_type(int, lambda v: v >= 2, "an integer >= 2"),
-                     default=1000, help="number of samples (1000)")
+    sim.add_argument("--steps", default=1000, help="number of samples (1000)",
+                     type=common.argument_type(int, lambda v: v >= 2, "an integer >= 2"))
     sim.add_argument("--out", required=True,
                      help="output file, .csv (with a .csv.json sidecar) or .parquet (needs "
                           "pyarrow: pip install \"marine-envs[parquet]\")")
-    sim.add_argument("--policy", type=policy_name, choices=POLICIES, default="prbs",
+    sim.add_argument("--policy", type=common.policy_name, choices=POLICIES, default="prbs",
                      help="nominal (the nominal input; its old name zero still works), an "
                           "excitation: sine, random (held uniform levels), prbs (held "
                           "+-amplitude levels), or lqr (closed loop on the sensors; with "
                           "--amplitude, plus a random-step dither held --hold s: a closed-loop "
                           "identification experiment); default prbs")
-    sim.add_argument("--amplitude", type=fraction, help="excitation amplitude, fraction of "
-                                                        "the actuator range (0.3; lqr: none)")
-    sim.add_argument("--period", type=positive_float, help="sine period, s (20)")
-    sim.add_argument("--hold", type=positive_float,
+    sim.add_argument("--amplitude", type=common.fraction,
+                     help="excitation amplitude, fraction of the actuator range (0.3; lqr: none)")
+    sim.add_argument("--period", type=common.positive_float, help="sine period, s (20)")
+    sim.add_argument("--hold", type=common.positive_float,
                      help="random/prbs hold time, s (5; lqr's dither 2)")
     sim.add_argument("--disturbances", default="", metavar="NAMES",
                      help="comma-separated disturbance channels to record too (the model's "
@@ -68,12 +58,10 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
                           "each (column <input>_applied, e.g. delta_applied): 'all' (the "
                           "default when given alone) or comma-separated inputs; the input "
                           "columns always hold the command")
-    sim.add_argument("--actuator-noise", type=argument_type(
+    sim.add_argument("--actuator-noise", type=common.argument_type(
         float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0"), metavar="STD",
                      help="white noise of the actuator position sensors, standard deviation "
                           "in the inputs' SI units (rad, N); default 0")
-    sim.add_argument("--quiet", action="store_true", help="no progress bar")
-    sim.set_defaults(run=handle)
     return sim
 
 
@@ -83,10 +71,10 @@ def handle(args: argparse.Namespace) -> int:
     from ..simulate import record
 
     out = check_suffix(args.out)  # and Parquet's pyarrow
-    output_file(args.out, args.force, "--out",
-                companions=(sidecar(out),) if out.suffix.lower() == ".csv" else ())
+    common.output_file(args.out, args.force, "--out",
+                       companions=(sidecar(out),) if out.suffix.lower() == ".csv" else ())
     env_kwargs = args.env_kwargs or {}
-    check_env(args.env, env_kwargs)
+    common.check_env(args.env, env_kwargs)
     options = {k: v for k, v in (("amplitude", args.amplitude), ("period", args.period),
                                  ("hold", args.hold)) if v is not None}
     disturbances = [n.strip() for n in args.disturbances.split(",") if n.strip()]
@@ -105,7 +93,7 @@ def handle(args: argparse.Namespace) -> int:
              if done.disturbance_names else "")
           + (f"; actuator positions {', '.join(n + '_applied' for n in done.actuator_names)}"
              if done.actuator_names else "") + f" -> {done.path}")
-    return 0 if done.signal is None else EXIT_SIGNAL + done.signal
+    return 0 if done.signal is None else common.EXIT_SIGNAL + done.signal
 
 
 def _actuator_sensors(text: str | None) -> bool | list[str]:

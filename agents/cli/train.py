@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .common import DEBUG, FORCE, SEED, check_estimator, env_id, output_dir, positive_int
+from . import common
 
 #: ``marine train``'s algorithms and backends: agents.sb3's ALGOS and BACKENDS, named here so
 #: that the parser (``--help``, ``--version``, any command) does not import torch.
@@ -19,25 +19,29 @@ TRAIN_BACKENDS = ("native", "dummy")
 RESUME_TAKES = ("env_id", "algo", "estimator", "n_envs", "backend", "seed", "out", "config")
 
 
+#: The command's description in its help (argparse fills the lines anew).
+DESCRIPTION = """\
+Train an SB3 agent on the native batched environment, optionally behind a state estimator.
+Hyperparameters per vehicle and algorithm come from agents/hyperparams.yaml (RL-Zoo style; --config
+another file); writes config.json (at once, then final), model.zip, vecnormalize.pkl (if
+normalised) and checkpoints/ into --out. Where the settings give validation_episodes, model.zip is
+the checkpoint that did best on them (fewest failures, then least cost) and last_model.zip the
+last. Ctrl-C stops at the next step, saves as at the end and exits with code 130; --resume DIR
+continues from the last saved agent with its step count.
+"""
+
+
 def add_parser(commands: Any) -> argparse.ArgumentParser:
     """Add ``marine train`` to ``commands`` (the subparsers of ``marine``)."""
     from estimators import registry
 
     train = commands.add_parser(
         "train", help="train a Stable-Baselines3 agent (PPO, SAC, TD3, A2C) on an environment",
-        description="Train an SB3 agent on the native batched environment, optionally behind "
-                    "a state estimator. Hyperparameters per vehicle and algorithm come from "
-                    "agents/hyperparams.yaml (RL-Zoo style; --config another file); writes "
-                    "config.json (at once, then final), model.zip, vecnormalize.pkl (if "
-                    "normalised) and checkpoints/ into --out. Where the settings give "
-                    "validation_episodes, model.zip is the checkpoint that did best on them "
-                    "(fewest failures, then least cost) and last_model.zip the last. Ctrl-C "
-                    "stops at the next step, saves as at the end and exits with code 130; "
-                    "--resume DIR continues from the last saved agent with its step count.",
-        parents=[DEBUG, SEED, FORCE],
+        description=DESCRIPTION,
+        parents=[common.DEBUG, common.SEED, common.FORCE, common.QUIET],
         option_help={"seed": "seed (default 0)",
                      "force": "replace a run already in --out (its model, checkpoints, logs)"})
-    train.add_argument("env_id", nargs="?", type=env_id,
+    train.add_argument("env_id", nargs="?", type=common.env_id,
                        help="environment id, e.g. marine_envs/USV-v0 (or USV-v0)")
     train.add_argument("--algo", choices=TRAIN_ALGOS,
                        help="ppo, sac, td3, a2c or ppo_lstm (sb3-contrib's RecurrentPPO: the "
@@ -45,10 +49,10 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
     train.add_argument("--estimator", choices=registry.names(), metavar="ESTIMATOR",
                        help="what the agent sees: raw (the sensors, the default), true (the "
                             f"true state) or an estimator: {registry.describe()}")
-    train.add_argument("--timesteps", type=positive_int,
+    train.add_argument("--timesteps", type=common.positive_int,
                        help="environment steps (default: the YAML's n_timesteps; with "
                             "--resume: the total to reach, default the run's own)")
-    train.add_argument("--n-envs", type=positive_int,
+    train.add_argument("--n-envs", type=common.positive_int,
                        help="boats stepped together (default: the YAML's)")
     train.add_argument("--backend", choices=TRAIN_BACKENDS,
                        help="native (our batched env, the default) or dummy (SB3's "
@@ -59,7 +63,6 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
                             "last saved agent, with its config.json's settings")
     train.add_argument("--config", metavar="YAML",
                        help="hyperparameters file in agents/hyperparams.yaml's format")
-    train.add_argument("--quiet", action="store_true", help="no progress bar")
     train.set_defaults(run=lambda args: handle(args, train))
     return train
 
@@ -77,7 +80,7 @@ def handle(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     else:
         if args.env_id is None or args.out is None:
             parser.error("the environment id and --out DIR are required (or --resume DIR)")
-        check_estimator(args.estimator)
+        common.check_estimator(args.estimator)
         config = Path(args.config) if args.config else sb3.HYPERPARAMS
         if not config.is_file():
             raise FileNotFoundError(f"--config {config}: no such file")
@@ -85,8 +88,8 @@ def handle(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
                      args.seed or 0, args.n_envs, args.backend or "native",
                      hyperparams_file=config)
         sb3.check_not_in_use(Path(args.out))  # a live run is named as such, --force or not
-        out = output_dir(args.out, args.force, "--out", sb3.existing_run,
-                         " (a training run: --resume it)")
+        out = common.output_dir(args.out, args.force, "--out", sb3.existing_run,
+                                " (a training run: --resume it)")
         result = sb3.train(args.env_id, args.algo or "ppo", args.estimator, args.timesteps,
                            out, args.seed or 0, args.n_envs, args.backend or "native",
                            progress_bar=not args.quiet, hyperparams_file=config,

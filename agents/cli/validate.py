@@ -7,16 +7,18 @@ import argparse
 import contextlib
 from typing import Any
 
-from .common import (
-    DEBUG,
-    FORCE,
-    JSON,
-    distinct,
-    output_file,
-    plot_path,
-    progress_bar,
-    write_json_output,
-)
+from . import common
+
+#: The command's description in its help (argparse fills the lines anew).
+DESCRIPTION = """\
+Predict each recording with the nominal-calibrated model of a diagnosis (its calibrated values, no
+findings) and its corrected model (with the findings): replayed (the recorded inputs, free
+simulation from the first measured state) and, with --rerun, re-run as the manoeuvre the record
+shows (a zig-zag with its rudder amplitude, heading check, first direction and rudder rate; a turn
+at its steady rudder). Prints per record and model the RMS error of every angle channel (deg) and
+the standard criteria of record and prediction (first and second overshoot, time to check yaw;
+turning rate), and says when a finding is used outside the range it was fitted on.
+"""
 
 
 def add_parser(commands: Any) -> argparse.ArgumentParser:
@@ -24,16 +26,8 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
     validate = commands.add_parser(
         "validate", help="check a diagnosis on other tests: predict records with its nominal "
                          "and corrected models",
-        description="Predict each recording with the nominal-calibrated model of a diagnosis "
-                    "(its calibrated values, no findings) and its corrected model (with the "
-                    "findings): replayed (the recorded inputs, free simulation from the first "
-                    "measured state) and, with --rerun, re-run as the manoeuvre the record shows "
-                    "(a zig-zag with its rudder amplitude, heading check, first direction and "
-                    "rudder rate; a turn at its steady rudder). Prints per record and model the "
-                    "RMS error of every angle channel (deg) and the standard criteria of record "
-                    "and prediction (first and second overshoot, time to check yaw; turning "
-                    "rate), and says when a finding is used outside the range it was fitted on.",
-        parents=[DEBUG, JSON, FORCE],
+        description=DESCRIPTION,
+        parents=[common.DEBUG, common.JSON, common.FORCE, common.QUIET],
         option_help={"json": "write the table as JSON",
                      "force": "replace existing outputs"})
     validate.add_argument("diagnosis", help="the diagnosis JSON written by 'marine diagnose "
@@ -45,30 +39,29 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
                           help="also re-run each record as this manoeuvre, closed loop")
     validate.add_argument("--plot", metavar="PNG",
                           help="write a figure: the heading of each record and the predictions")
-    validate.add_argument("--quiet", action="store_true", help="no progress bar")
-    validate.set_defaults(run=handle)
     return validate
 
 
 def handle(args: argparse.Namespace) -> int:
     from estimators.diagnosis.validation import validate
 
-    out = output_file(args.json, args.force, "--json")
-    plot = plot_path(args.plot, args.force)
-    distinct(("--json", out), ("--plot", plot))
+    out = common.output_file(args.json, args.force, "--json")
+    plot = common.plot_path(args.plot, args.force)
+    common.distinct(("--json", out), ("--plot", plot))
     with contextlib.ExitStack() as stack:
         bars: list[Any] = []
 
         def progress(done: int, total: int) -> None:  # the bar once the inputs are checked
             if not bars:
-                bars.append(stack.enter_context(progress_bar(total, "predicting", not args.quiet)))
+                bars.append(stack.enter_context(
+                    common.progress_bar(total, "predicting", not args.quiet)))
             if bars[0] is not None:
                 bars[0].update(done - bars[0].n)
 
         result = validate(args.diagnosis, args.recording, args.rerun, progress)
     print(result.table())
     if out is not None:
-        write_json_output(out, result.to_dict())
+        common.write_json_output(out, result.to_dict())
         print(f"table written to {out}")
     if plot is not None:
         result.plot(plot)
