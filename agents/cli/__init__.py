@@ -36,7 +36,7 @@ from collections.abc import Iterator, Sequence
 from typing import Any, NoReturn
 
 from . import bench, demo, diagnose, envs, episode, evaluate, reproduce, simulate, train, validate
-from .common import DEBUG, EXIT_INTERRUPTED, EXIT_SIGNAL, EXIT_USAGE, USER_ERRORS, Parser
+from .common import DEBUG, EXIT_INTERRUPTED, EXIT_SIGNAL, EXIT_USAGE, SHARED, USER_ERRORS, Parser
 from .train import TRAIN_ALGOS, TRAIN_BACKENDS
 
 __all__ = ["COMMANDS", "DESCRIPTION", "EXIT_INTERRUPTED", "EXIT_SIGNAL", "EXIT_USAGE",
@@ -50,8 +50,9 @@ sensors; the literature's state estimators as wrappers; LQR and RL agents on the
 Angles on the command line are in degrees; everything inside (and in recordings) is SI/radians.
 """
 
-#: The commands, in the order ``marine --help`` lists them: each module's ``add_parser`` adds
-#: the command's parser, its ``handle`` runs the command.
+#: The commands, in the order ``marine --help`` lists them. Each module says what the command is
+#: (``HELP``, ``DESCRIPTION``), which shared options it takes in its own words
+#: (``COMMON_OPTIONS``), its own arguments (``arguments``) and what it does (``handle``).
 COMMANDS = (demo, simulate, episode, reproduce, diagnose, validate, train, evaluate, bench, envs)
 
 
@@ -64,10 +65,23 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"marine-envs {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for command in COMMANDS:
-        added = command.add_parser(commands)
-        if added.get_default("run") is None:  # (train's handler takes its parser too)
-            added.set_defaults(run=command.handle)
+        _add(commands, command)
     return parser
+
+
+def _add(commands: Any, command: Any) -> None:
+    """Add ``command`` (a module of :data:`COMMANDS`) to the subparsers ``commands``: its
+    --debug and the shared options it takes (their one parent parser each, worded in its
+    terms), its own arguments and its handler."""
+    shared = command.COMMON_OPTIONS
+    parser = commands.add_parser(
+        command.__name__.rsplit(".", 1)[1], help=command.HELP, description=command.DESCRIPTION,
+        formatter_class=getattr(command, "FORMATTER", argparse.HelpFormatter),
+        parents=[SHARED["debug"], *(SHARED[dest] for dest in shared)],
+        option_help={dest: words for dest, words in shared.items() if words is not None})
+    command.arguments(parser)
+    if parser.get_default("run") is None:  # (train's handler takes its parser too)
+        parser.set_defaults(run=command.handle)
 
 
 @contextlib.contextmanager

@@ -1,5 +1,5 @@
 """``marine bench``: the estimator x controller benchmark grid over vehicles, seas and sensors,
-locally or on Ray. Its parser (:func:`add_parser`) beside its handler (:func:`handle`)."""
+locally or on Ray. Its arguments (:func:`arguments`) beside its handler (:func:`handle`)."""
 
 from __future__ import annotations
 
@@ -11,10 +11,11 @@ import os
 import shutil
 import sys
 from pathlib import Path
-from typing import Any
 
 from . import common
 
+#: The command's line in ``marine --help``.
+HELP = "estimator x controller benchmark grid over vehicles, seas and sensors"
 DESCRIPTION = """\
 Run a grid of vehicles x estimators x sea states x sensor degradations x controllers x seeds.
 Every controller is scored by the task's quadratic cost on the same seeded episodes; each cell
@@ -44,20 +45,23 @@ GRID_OPTIONS = ("vehicles", "estimators", "controllers", "seas", "sensors", "see
                 "timesteps")
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    """Add ``marine bench`` to ``commands`` (the subparsers of ``marine``)."""
+#: The description is laid out by hand.
+FORMATTER = argparse.RawDescriptionHelpFormatter
+#: The options it shares with other commands (:data:`agents.cli.common.SHARED`), each in
+#: the command's own words (None: the common wording).
+COMMON_OPTIONS = {
+    "json": 'also write {"rows": [...]} as JSON',
+    "force": "start afresh: clear what an earlier run wrote into --out, and "
+             "replace --json and --report",
+    "quiet": "no progress bars",
+}
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
+    """``marine bench``'s own arguments."""
     from estimators import registry
 
-    bench = commands.add_parser(
-        "bench", help="estimator x controller benchmark grid over vehicles, seas and sensors",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-        description=DESCRIPTION,
-        parents=[common.DEBUG, common.JSON, common.FORCE, common.QUIET],
-        option_help={"quiet": "no progress bars",
-                     "json": 'also write {"rows": [...]} as JSON',
-                     "force": "start afresh: clear what an earlier run wrote into --out, and "
-                            "replace --json and --report"})
-    axes = bench.add_argument_group("the grid (each a space-separated list)")
+    axes = parser.add_argument_group("the grid (each a space-separated list)")
     axes.add_argument("--vehicles", nargs="+", type=str,
                       help="usv hydrofoil rov dp hovercraft (default: all)")
     axes.add_argument("--estimators", nargs="+",
@@ -77,22 +81,21 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
                       help="episode length, s (default: the env's)")
     axes.add_argument("--timesteps", type=common.positive_int,
                       help="training steps of each agent the grid trains (default 100000)")
-    bench.add_argument("--quick", action="store_true",
-                       help="a small grid over all five vehicles: true raw kf akf, lqr and ppo, "
-                            "default and noise=32 sensors, 3 seeds of 60 s, 20000-step PPO "
-                            "(other options override its settings)")
-    bench.add_argument("--out", default="bench", metavar="DIR",
-                       help="rows.csv, summary.md, figures, trained agents; a rerun of the "
-                            "same grid resumes (default: bench)")
-    bench.add_argument("--backend", choices=("local", "ray"), default="local",
-                       help="local processes (default) or Ray tasks")
-    bench.add_argument("--address", help="Ray cluster address (auto, or HOST:PORT); without it "
-                                         "--backend ray starts a local Ray")
-    bench.add_argument("--workers", type=common.positive_int, default=os.cpu_count() or 1,
-                       help="processes (local) or CPUs of the local Ray (default: all cores)")
-    bench.add_argument("--report", metavar="DIR",
-                       help="also write DIR/index.html: the tables and figures in one page")
-    return bench
+    parser.add_argument("--quick", action="store_true",
+                        help="a small grid over all five vehicles: true raw kf akf, lqr and ppo, "
+                             "default and noise=32 sensors, 3 seeds of 60 s, 20000-step PPO "
+                             "(other options override its settings)")
+    parser.add_argument("--out", default="bench", metavar="DIR",
+                        help="rows.csv, summary.md, figures, trained agents; a rerun of the "
+                             "same grid resumes (default: bench)")
+    parser.add_argument("--backend", choices=("local", "ray"), default="local",
+                        help="local processes (default) or Ray tasks")
+    parser.add_argument("--address", help="Ray cluster address (auto, or HOST:PORT); without it "
+                                          "--backend ray starts a local Ray")
+    parser.add_argument("--workers", type=common.positive_int, default=os.cpu_count() or 1,
+                        help="processes (local) or CPUs of the local Ray (default: all cores)")
+    parser.add_argument("--report", metavar="DIR",
+                        help="also write DIR/index.html: the tables and figures in one page")
 
 
 def handle(args: argparse.Namespace) -> int:

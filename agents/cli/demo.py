@@ -1,41 +1,41 @@
-"""``marine demo``: a short USV episode, rudder fixed vs LQR: a table and a figure. Its parser
-(:func:`add_parser`) beside its handler (:func:`handle`)."""
+"""``marine demo``: a short USV episode, rudder fixed vs LQR: a table and a figure. Its arguments
+(:func:`arguments`) beside its handler (:func:`handle`)."""
 
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 from . import common
 
 DEMO_PLOT = "marine_demo.png"
 
 
+#: The command's line in ``marine --help``.
+HELP = "a short USV episode: rudder fixed vs LQR; prints a table, writes a plot"
 #: The command's description in its help (argparse fills the lines anew).
 DESCRIPTION = """\
 Simulate the USV in a stern-quartering random sea with the rudder fixed and with a discrete LQR
 autopilot acting on the noisy, quantized sensors; print RMS heading, roll and rudder and the
 episode returns; write a plot.
 """
+#: The options it shares with other commands (:data:`agents.cli.common.SHARED`), each in
+#: the command's own words (None: the common wording).
+COMMON_OPTIONS = {
+    "seed": "episode seed (0)",
+    "json": "also write the summary as JSON",
+    "force": "replace existing outputs",
+}
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    """Add ``marine demo`` to ``commands`` (the subparsers of ``marine``)."""
-    demo = commands.add_parser(
-        "demo", help="a short USV episode: rudder fixed vs LQR; prints a table, writes a plot",
-        description=DESCRIPTION,
-        parents=[common.DEBUG, common.SEED, common.JSON, common.FORCE],
-        option_help={"seed": "episode seed (0)",
-                     "json": "also write the summary as JSON",
-                     "force": "replace existing outputs"})
-    demo.add_argument("--seconds", type=common.positive_float, default=100.0,
-                      help="episode length, s (100)")
-    demo.add_argument("--hs", type=common.positive_float, default=2.0,
-                      help="significant wave height, m (2.0)")
-    demo.add_argument("--plot", help=f"figure path (default {DEMO_PLOT}, the demo's own: "
-                                     "rewritten; another existing file needs --force)")
-    demo.add_argument("--no-plot", action="store_true", help="do not write a figure")
-    return demo
+def arguments(parser: argparse.ArgumentParser) -> None:
+    """``marine demo``'s own arguments."""
+    parser.add_argument("--seconds", type=common.positive_float, default=100.0,
+                        help="episode length, s (100)")
+    parser.add_argument("--hs", type=common.positive_float, default=2.0,
+                        help="significant wave height, m (2.0)")
+    parser.add_argument("--plot", help=f"figure path (default {DEMO_PLOT}, the demo's own: "
+                                       "rewritten; another existing file needs --force)")
+    parser.add_argument("--no-plot", action="store_true", help="do not write a figure")
 
 
 def handle(args: argparse.Namespace) -> int:

@@ -1,5 +1,5 @@
 """``marine diagnose``: find why a model and its recordings disagree: which physics the model lacks.
-Its parser (:func:`add_parser`) beside its handler (:func:`handle`)."""
+Its arguments (:func:`arguments`) beside its handler (:func:`handle`)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,8 @@ from typing import Any
 
 from . import common
 
+#: The command's line in ``marine --help``.
+HELP = "find why a model and a recording disagree: which physics it lacks"
 DESCRIPTION = """\
 Diagnose why a vehicle model and recordings of the vehicle disagree. Prints a summary and the
 channel ranking; exit code 0 whether or not a mismatch is found (or the record is too short or
@@ -59,32 +61,37 @@ the JSON (--json, or diagnosis.json in --report):
 """
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    """Add ``marine diagnose`` to ``commands`` (the subparsers of ``marine``)."""
-    diagnose = commands.add_parser(
-        "diagnose", help="find why a model and a recording disagree: which physics it lacks",
-        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
-        parents=[common.DEBUG, common.JSON, common.FORCE, common.QUIET],
-        option_help={"json": "write the diagnosis as JSON",
-                     "force": "replace an existing --json, or the report (and every figure) "
-                               "in --report"})
-    diagnose.add_argument("recording", nargs="+",
-                          help="recording file(s) (.csv with its .json sidecar, or .parquet), "
-                               "as written by 'marine simulate'; several: one series")
-    diagnose.add_argument("--model", help="model name (default: the recording's metadata)")
-    diagnose.add_argument("--params", metavar="FILE",
-                          help='JSON object of nominal parameter overrides (names as in '
-                               'docs/models.md, SI units), e.g. {"wn": 0.6}; applied on top of the '
-                               "recording's metadata")
-    diagnose.add_argument("--calibrate", metavar="P1,P2,...",
-                          help="nominal parameters to fit first (comma-separated), so that "
-                               "only what the model's structure leaves out remains")
-    diagnose.add_argument("--method", choices=("auto", "free", "innovations"), default="auto",
-                          help="free simulation (model tests) or filter innovations (seaway "
-                               "records); default: auto (see above)")
-    diagnose.add_argument("--report", metavar="DIR",
-                          help="write report.md, its PNG figures and diagnosis.json into DIR")
-    cut = diagnose.add_argument_group(
+#: The description is laid out by hand.
+FORMATTER = argparse.RawDescriptionHelpFormatter
+#: The options it shares with other commands (:data:`agents.cli.common.SHARED`), each in
+#: the command's own words (None: the common wording).
+COMMON_OPTIONS = {
+    "json": "write the diagnosis as JSON",
+    "force": "replace an existing --json, or the report (and every figure) "
+             "in --report",
+    "quiet": None,
+}
+
+
+def arguments(parser: argparse.ArgumentParser) -> None:
+    """``marine diagnose``'s own arguments."""
+    parser.add_argument("recording", nargs="+",
+                        help="recording file(s) (.csv with its .json sidecar, or .parquet), "
+                             "as written by 'marine simulate'; several: one series")
+    parser.add_argument("--model", help="model name (default: the recording's metadata)")
+    parser.add_argument("--params", metavar="FILE",
+                        help='JSON object of nominal parameter overrides (names as in '
+                             'docs/models.md, SI units), e.g. {"wn": 0.6}; applied on top of the '
+                             "recording's metadata")
+    parser.add_argument("--calibrate", metavar="P1,P2,...",
+                        help="nominal parameters to fit first (comma-separated), so that "
+                             "only what the model's structure leaves out remains")
+    parser.add_argument("--method", choices=("auto", "free", "innovations"), default="auto",
+                        help="free simulation (model tests) or filter innovations (seaway "
+                             "records); default: auto (see above)")
+    parser.add_argument("--report", metavar="DIR",
+                        help="write report.md, its PNG figures and diagnosis.json into DIR")
+    cut = parser.add_argument_group(
         "long records (the expected run time is printed first; a seaway record takes about "
         "1 ms per sample)")
     cut.add_argument("--start", type=common.finite_float, metavar="SECONDS",
@@ -94,7 +101,6 @@ def add_parser(commands: Any) -> argparse.ArgumentParser:
     cut.add_argument("--decimate", type=common.positive_int, default=1, metavar="K",
                      help="keep every K-th sample (no filtering: keep the new rate well above "
                           "the vehicle's bandwidth); default 1")
-    return diagnose
 
 
 def handle(args: argparse.Namespace) -> int:

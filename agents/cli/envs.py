@@ -4,16 +4,17 @@ its handler (:func:`handle`)."""
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
-from . import common
+#: The command's line in ``marine --help``.
+HELP = "list the environments with their spaces"
+DESCRIPTION = None
+#: The options it shares with other commands (:data:`agents.cli.common.SHARED`), each in
+#: the command's own words (None: the common wording).
+COMMON_OPTIONS = {}
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    """Add ``marine envs`` to ``commands`` (the subparsers of ``marine``)."""
-    envs = commands.add_parser("envs", help="list the environments with their spaces",
-                               parents=[common.DEBUG])
-    return envs
+def arguments(parser: argparse.ArgumentParser) -> None:
+    """``marine envs``'s own arguments."""
 
 
 def handle(args: argparse.Namespace) -> int:

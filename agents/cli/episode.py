@@ -1,50 +1,50 @@
 """``marine episode``: run one episode of any environment behind any policy and estimator; RMS
-errors and a figure. Its parser (:func:`add_parser`) beside its handler (:func:`handle`)."""
+errors and a figure. Its arguments (:func:`arguments`) beside its handler (:func:`handle`)."""
 
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 from . import common
 
+#: The command's line in ``marine --help``.
+HELP = "run one episode of any environment; print RMS errors, plot it"
 #: The command's description in its help (argparse fills the lines anew).
 DESCRIPTION = """\
 Run one episode of an environment and print its return and the RMS error of every state the task
 weighs (angles in degrees); with --plot, draw the true and measured states and the inputs against
 time.
 """
+#: The options it shares with other commands (:data:`agents.cli.common.SHARED`), each in
+#: the command's own words (None: the common wording).
+COMMON_OPTIONS = {
+    "seed": "episode seed (0)",
+    "json": "also write the summary as JSON",
+    "force": "replace existing outputs",
+    "env_kwargs": 'environment arguments, SI units, e.g. \'{"zigzag": "20/20"}\'',
+}
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    """Add ``marine episode`` to ``commands`` (the subparsers of ``marine``)."""
+def arguments(parser: argparse.ArgumentParser) -> None:
+    """``marine episode``'s own arguments."""
     from estimators import registry
 
     from ..episode import EPISODE_ESTIMATORS, EPISODE_POLICIES
 
-    episode = commands.add_parser(
-        "episode", help="run one episode of any environment; print RMS errors, plot it",
-        description=DESCRIPTION,
-        parents=[common.DEBUG, common.SEED, common.JSON, common.FORCE, common.ENV_KWARGS],
-        option_help={"seed": "episode seed (0)",
-                     "json": "also write the summary as JSON",
-                     "force": "replace existing outputs",
-                     "env_kwargs": 'environment arguments, SI units, e.g. \'{"zigzag": "20/20"}\''})
-    episode.add_argument("env", type=common.env_id,
-                         help="environment id, e.g. marine_envs/ROV-v0 (or ROV-v0)")
-    episode.add_argument("--policy", type=common.policy_name, choices=EPISODE_POLICIES,
-                         default="lqr-state",
-                         help="lqr-state (LQR on the true state, the default), lqr (on the raw "
-                              "sensors), nominal (the nominal input; its old name zero still "
-                              "works) or an excitation: sine, random, prbs")
-    episode.add_argument("--estimator", choices=EPISODE_ESTIMATORS,
-                         help="put an estimator between the sensors and the policy: "
-                              f"{registry.describe()}; --policy lqr then acts on the full "
-                              "estimated state")
-    episode.add_argument("--seconds", type=common.positive_float,
-                         help="episode length, s (the env's own)")
-    episode.add_argument("--plot", metavar="PNG", help="write a figure of the episode")
-    return episode
+    parser.add_argument("env", type=common.env_id,
+                        help="environment id, e.g. marine_envs/ROV-v0 (or ROV-v0)")
+    parser.add_argument("--policy", type=common.policy_name, choices=EPISODE_POLICIES,
+                        default="lqr-state",
+                        help="lqr-state (LQR on the true state, the default), lqr (on the raw "
+                             "sensors), nominal (the nominal input; its old name zero still "
+                             "works) or an excitation: sine, random, prbs")
+    parser.add_argument("--estimator", choices=EPISODE_ESTIMATORS,
+                        help="put an estimator between the sensors and the policy: "
+                             f"{registry.describe()}; --policy lqr then acts on the full "
+                             "estimated state")
+    parser.add_argument("--seconds", type=common.positive_float,
+                        help="episode length, s (the env's own)")
+    parser.add_argument("--plot", metavar="PNG", help="write a figure of the episode")
 
 
 def handle(args: argparse.Namespace) -> int:

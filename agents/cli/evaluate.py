@@ -1,38 +1,39 @@
-"""``marine evaluate``: score an agent ``marine train`` saved on seeded episodes. Its parser
-(:func:`add_parser`) beside its handler (:func:`handle`)."""
+"""``marine evaluate``: score an agent ``marine train`` saved on seeded episodes. Its arguments
+(:func:`arguments`) beside its handler (:func:`handle`)."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Any
 
 from . import common
 
+#: The command's line in ``marine --help``.
+HELP = ("evaluate an agent 'marine train' saved: cost and errors over seeded "
+        "episodes")
 #: The command's description in its help (argparse fills the lines anew).
 DESCRIPTION = """\
 Run the agent over seeded episodes behind its training estimator and print the task's quadratic
 cost, failures, RMS errors of the weighted states and inputs (angles in degrees), the fraction of
 saturated steps and the estimator's RMS errors, as mean ± std over the episodes.
 """
+#: The options it shares with other commands (:data:`agents.cli.common.SHARED`), each in
+#: the command's own words (None: the common wording).
+COMMON_OPTIONS = {
+    "seed": "first episode's seed; the others follow (default 0)",
+    "json": "also write {\"rows\": [...]} as JSON",
+    "force": "replace an existing --json",
+    "quiet": None,
+}
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    """Add ``marine evaluate`` to ``commands`` (the subparsers of ``marine``)."""
-    evaluate = commands.add_parser(
-        "evaluate", help="evaluate an agent 'marine train' saved: cost and errors over seeded "
-                         "episodes",
-        description=DESCRIPTION,
-        parents=[common.DEBUG, common.SEED, common.JSON, common.FORCE, common.QUIET],
-        option_help={"seed": "first episode's seed; the others follow (default 0)",
-                     "json": "also write {\"rows\": [...]} as JSON",
-                     "force": "replace an existing --json"})
-    evaluate.add_argument("dir", help="the directory 'marine train --out' wrote (its model.zip, "
-                                      "else its latest checkpoint), or a model file in it "
-                                      "(e.g. checkpoints/model_8192_steps.zip)")
-    evaluate.add_argument("--episodes", type=common.positive_int, default=5,
-                          help="episodes (default 5)")
-    return evaluate
+def arguments(parser: argparse.ArgumentParser) -> None:
+    """``marine evaluate``'s own arguments."""
+    parser.add_argument("dir", help="the directory 'marine train --out' wrote (its model.zip, "
+                                    "else its latest checkpoint), or a model file in it "
+                                    "(e.g. checkpoints/model_8192_steps.zip)")
+    parser.add_argument("--episodes", type=common.positive_int, default=5,
+                        help="episodes (default 5)")
 
 
 def handle(args: argparse.Namespace) -> int:

@@ -1,15 +1,16 @@
 """``marine simulate``: record an episode of any environment (CSV or Parquet) in the recording
-format. Its parser (:func:`add_parser`) beside its handler (:func:`handle`)."""
+format. Its arguments (:func:`arguments`) beside its handler (:func:`handle`)."""
 
 from __future__ import annotations
 
 import argparse
 import math
 import sys
-from typing import Any
 
 from . import common
 
+#: The command's line in ``marine --help``.
+HELP = "record an episode (CSV or Parquet) in the recording format"
 #: The command's description in its help (argparse fills the lines anew).
 DESCRIPTION = """\
 Run an environment under an excitation signal or LQR and record time, commanded inputs and sensor
@@ -17,52 +18,53 @@ outputs (SI units) with the model name and parameters as metadata (an actuator e
 acts after the command: --actuator-sensors records what the actuators applied too). The format
 follows the file suffix: .csv (with a .csv.json sidecar) or .parquet (needs pyarrow).
 """
+#: The options it shares with other commands (:data:`agents.cli.common.SHARED`), each in
+#: the command's own words (None: the common wording).
+COMMON_OPTIONS = {
+    "seed": "episode seed (random if omitted)",
+    "force": "replace an existing --out",
+    "env_kwargs": "environment arguments, SI units, e.g. "
+                  '\'{"hs": 3.0, "tp": 9}\'',
+    "quiet": None,
+}
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    """Add ``marine simulate`` to ``commands`` (the subparsers of ``marine``)."""
+def arguments(parser: argparse.ArgumentParser) -> None:
+    """``marine simulate``'s own arguments."""
     from ..simulate import POLICIES
 
-    sim = commands.add_parser(
-        "simulate", help="record an episode (CSV or Parquet) in the recording format",
-        description=DESCRIPTION,
-        parents=[common.DEBUG, common.SEED, common.FORCE, common.ENV_KWARGS, common.QUIET],
-        option_help={"seed": "episode seed (random if omitted)",
-                     "force": "replace an existing --out",
-                     "env_kwargs": "environment arguments, SI units, e.g. "
-                                   '\'{"hs": 3.0, "tp": 9}\''})
-    sim.add_argument("--env", type=common.env_id, default="marine_envs/USV-v0",
-                     help="environment id (marine_envs/USV-v0, or USV-v0)")
-    sim.add_argument("--steps", default=1000, help="number of samples (1000)",
-                     type=common.argument_type(int, lambda v: v >= 2, "an integer >= 2"))
-    sim.add_argument("--out", required=True,
-                     help="output file, .csv (with a .csv.json sidecar) or .parquet (needs "
-                          "pyarrow: pip install \"marine-envs[parquet]\")")
-    sim.add_argument("--policy", type=common.policy_name, choices=POLICIES, default="prbs",
-                     help="nominal (the nominal input; its old name zero still works), an "
-                          "excitation: sine, random (held uniform levels), prbs (held "
-                          "+-amplitude levels), or lqr (closed loop on the sensors; with "
-                          "--amplitude, plus a random-step dither held --hold s: a closed-loop "
-                          "identification experiment); default prbs")
-    sim.add_argument("--amplitude", type=common.fraction,
-                     help="excitation amplitude, fraction of the actuator range (0.3; lqr: none)")
-    sim.add_argument("--period", type=common.positive_float, help="sine period, s (20)")
-    sim.add_argument("--hold", type=common.positive_float,
-                     help="random/prbs hold time, s (5; lqr's dither 2)")
-    sim.add_argument("--disturbances", default="", metavar="NAMES",
-                     help="comma-separated disturbance channels to record too (the model's "
-                          "names, e.g. the ROV's morph command s_cmd or the hovercraft's "
-                          "wind_north,wind_east): a diagnosis then takes them as known inputs")
-    sim.add_argument("--actuator-sensors", nargs="?", const="all", metavar="NAMES",
-                     help="record what the actuators applied too, as a position sensor on "
-                          "each (column <input>_applied, e.g. delta_applied): 'all' (the "
-                          "default when given alone) or comma-separated inputs; the input "
-                          "columns always hold the command")
-    sim.add_argument("--actuator-noise", type=common.argument_type(
+    parser.add_argument("--env", type=common.env_id, default="marine_envs/USV-v0",
+                        help="environment id (marine_envs/USV-v0, or USV-v0)")
+    parser.add_argument("--steps", default=1000, help="number of samples (1000)",
+                        type=common.argument_type(int, lambda v: v >= 2, "an integer >= 2"))
+    parser.add_argument("--out", required=True,
+                        help="output file, .csv (with a .csv.json sidecar) or .parquet (needs "
+                             "pyarrow: pip install \"marine-envs[parquet]\")")
+    parser.add_argument("--policy", type=common.policy_name, choices=POLICIES, default="prbs",
+                        help="nominal (the nominal input; its old name zero still works), an "
+                             "excitation: sine, random (held uniform levels), prbs (held "
+                             "+-amplitude levels), or lqr (closed loop on the sensors; with "
+                             "--amplitude, plus a random-step dither held --hold s: a closed-loop "
+                             "identification experiment); default prbs")
+    parser.add_argument("--amplitude", type=common.fraction,
+                        help="excitation amplitude, fraction of the actuator range (0.3; lqr: "
+                             "none)")
+    parser.add_argument("--period", type=common.positive_float, help="sine period, s (20)")
+    parser.add_argument("--hold", type=common.positive_float,
+                        help="random/prbs hold time, s (5; lqr's dither 2)")
+    parser.add_argument("--disturbances", default="", metavar="NAMES",
+                        help="comma-separated disturbance channels to record too (the model's "
+                             "names, e.g. the ROV's morph command s_cmd or the hovercraft's "
+                             "wind_north,wind_east): a diagnosis then takes them as known inputs")
+    parser.add_argument("--actuator-sensors", nargs="?", const="all", metavar="NAMES",
+                        help="record what the actuators applied too, as a position sensor on "
+                             "each (column <input>_applied, e.g. delta_applied): 'all' (the "
+                             "default when given alone) or comma-separated inputs; the input "
+                             "columns always hold the command")
+    parser.add_argument("--actuator-noise", type=common.argument_type(
         float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0"), metavar="STD",
                      help="white noise of the actuator position sensors, standard deviation "
                           "in the inputs' SI units (rad, N); default 0")
-    return sim
 
 
 def handle(args: argparse.Namespace) -> int:

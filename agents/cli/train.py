@@ -1,12 +1,11 @@
 """``marine train``: train a Stable-Baselines3 agent on the batched environment (or continue one,
-``--resume``). Its parser (:func:`add_parser`) beside its handler (:func:`handle`)."""
+``--resume``). Its arguments (:func:`arguments`) beside its handler (:func:`handle`)."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
 
 from . import common
 
@@ -19,6 +18,8 @@ TRAIN_BACKENDS = ("native", "dummy")
 RESUME_TAKES = ("env_id", "algo", "estimator", "n_envs", "backend", "seed", "out", "config")
 
 
+#: The command's line in ``marine --help``.
+HELP = "train a Stable-Baselines3 agent (PPO, SAC, TD3, A2C) on an environment"
 #: The command's description in its help (argparse fills the lines anew).
 DESCRIPTION = """\
 Train an SB3 agent on the native batched environment, optionally behind a state estimator.
@@ -29,42 +30,42 @@ the checkpoint that did best on them (fewest failures, then least cost) and last
 last. Ctrl-C stops at the next step, saves as at the end and exits with code 130; --resume DIR
 continues from the last saved agent with its step count.
 """
+#: The options it shares with other commands (:data:`agents.cli.common.SHARED`), each in
+#: the command's own words (None: the common wording).
+COMMON_OPTIONS = {
+    "seed": "seed (default 0)",
+    "force": "replace a run already in --out (its model, checkpoints, logs)",
+    "quiet": None,
+}
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    """Add ``marine train`` to ``commands`` (the subparsers of ``marine``)."""
+def arguments(parser: argparse.ArgumentParser) -> None:
+    """``marine train``'s own arguments."""
     from estimators import registry
 
-    train = commands.add_parser(
-        "train", help="train a Stable-Baselines3 agent (PPO, SAC, TD3, A2C) on an environment",
-        description=DESCRIPTION,
-        parents=[common.DEBUG, common.SEED, common.FORCE, common.QUIET],
-        option_help={"seed": "seed (default 0)",
-                     "force": "replace a run already in --out (its model, checkpoints, logs)"})
-    train.add_argument("env_id", nargs="?", type=common.env_id,
-                       help="environment id, e.g. marine_envs/USV-v0 (or USV-v0)")
-    train.add_argument("--algo", choices=TRAIN_ALGOS,
-                       help="ppo, sac, td3, a2c or ppo_lstm (sb3-contrib's RecurrentPPO: the "
-                            "recurrent extra); default ppo")
-    train.add_argument("--estimator", choices=registry.names(), metavar="ESTIMATOR",
-                       help="what the agent sees: raw (the sensors, the default), true (the "
-                            f"true state) or an estimator: {registry.describe()}")
-    train.add_argument("--timesteps", type=common.positive_int,
-                       help="environment steps (default: the YAML's n_timesteps; with "
-                            "--resume: the total to reach, default the run's own)")
-    train.add_argument("--n-envs", type=common.positive_int,
-                       help="boats stepped together (default: the YAML's)")
-    train.add_argument("--backend", choices=TRAIN_BACKENDS,
-                       help="native (our batched env, the default) or dummy (SB3's "
-                            "DummyVecEnv)")
-    train.add_argument("--out", metavar="DIR", help="output directory")
-    train.add_argument("--resume", metavar="DIR",
-                       help="continue the run in DIR (a 'marine train --out' folder) from its "
-                            "last saved agent, with its config.json's settings")
-    train.add_argument("--config", metavar="YAML",
-                       help="hyperparameters file in agents/hyperparams.yaml's format")
-    train.set_defaults(run=lambda args: handle(args, train))
-    return train
+    parser.add_argument("env_id", nargs="?", type=common.env_id,
+                        help="environment id, e.g. marine_envs/USV-v0 (or USV-v0)")
+    parser.add_argument("--algo", choices=TRAIN_ALGOS,
+                        help="ppo, sac, td3, a2c or ppo_lstm (sb3-contrib's RecurrentPPO: the "
+                             "recurrent extra); default ppo")
+    parser.add_argument("--estimator", choices=registry.names(), metavar="ESTIMATOR",
+                        help="what the agent sees: raw (the sensors, the default), true (the "
+                             f"true state) or an estimator: {registry.describe()}")
+    parser.add_argument("--timesteps", type=common.positive_int,
+                        help="environment steps (default: the YAML's n_timesteps; with "
+                             "--resume: the total to reach, default the run's own)")
+    parser.add_argument("--n-envs", type=common.positive_int,
+                        help="boats stepped together (default: the YAML's)")
+    parser.add_argument("--backend", choices=TRAIN_BACKENDS,
+                        help="native (our batched env, the default) or dummy (SB3's "
+                             "DummyVecEnv)")
+    parser.add_argument("--out", metavar="DIR", help="output directory")
+    parser.add_argument("--resume", metavar="DIR",
+                        help="continue the run in DIR (a 'marine train --out' folder) from its "
+                             "last saved agent, with its config.json's settings")
+    parser.add_argument("--config", metavar="YAML",
+                        help="hyperparameters file in agents/hyperparams.yaml's format")
+    parser.set_defaults(run=lambda args: handle(args, parser))
 
 
 def handle(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:

@@ -1,5 +1,5 @@
 """``marine validate``: check a diagnosis on other tests: predict records with its nominal and
-corrected models. Its parser (:func:`add_parser`) beside its handler (:func:`handle`)."""
+corrected models. Its arguments (:func:`arguments`) beside its handler (:func:`handle`)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,9 @@ from typing import Any
 
 from . import common
 
+#: The command's line in ``marine --help``.
+HELP = ("check a diagnosis on other tests: predict records with its nominal "
+        "and corrected models")
 #: The command's description in its help (argparse fills the lines anew).
 DESCRIPTION = """\
 Predict each recording with the nominal-calibrated model of a diagnosis (its calibrated values, no
@@ -19,27 +22,26 @@ at its steady rudder). Prints per record and model the RMS error of every angle 
 the standard criteria of record and prediction (first and second overshoot, time to check yaw;
 turning rate), and says when a finding is used outside the range it was fitted on.
 """
+#: The options it shares with other commands (:data:`agents.cli.common.SHARED`), each in
+#: the command's own words (None: the common wording).
+COMMON_OPTIONS = {
+    "json": "write the table as JSON",
+    "force": "replace existing outputs",
+    "quiet": None,
+}
 
 
-def add_parser(commands: Any) -> argparse.ArgumentParser:
-    """Add ``marine validate`` to ``commands`` (the subparsers of ``marine``)."""
-    validate = commands.add_parser(
-        "validate", help="check a diagnosis on other tests: predict records with its nominal "
-                         "and corrected models",
-        description=DESCRIPTION,
-        parents=[common.DEBUG, common.JSON, common.FORCE, common.QUIET],
-        option_help={"json": "write the table as JSON",
-                     "force": "replace existing outputs"})
-    validate.add_argument("diagnosis", help="the diagnosis JSON written by 'marine diagnose "
-                                            "--json'")
-    validate.add_argument("recording", nargs="+",
-                          help="recording file(s) of the diagnosis's model (.csv with its "
-                               ".json sidecar, or .parquet), best tests it was not fitted on")
-    validate.add_argument("--rerun", choices=("zigzag", "turn"),
-                          help="also re-run each record as this manoeuvre, closed loop")
-    validate.add_argument("--plot", metavar="PNG",
-                          help="write a figure: the heading of each record and the predictions")
-    return validate
+def arguments(parser: argparse.ArgumentParser) -> None:
+    """``marine validate``'s own arguments."""
+    parser.add_argument("diagnosis", help="the diagnosis JSON written by 'marine diagnose "
+                                          "--json'")
+    parser.add_argument("recording", nargs="+",
+                        help="recording file(s) of the diagnosis's model (.csv with its "
+                             ".json sidecar, or .parquet), best tests it was not fitted on")
+    parser.add_argument("--rerun", choices=("zigzag", "turn"),
+                        help="also re-run each record as this manoeuvre, closed loop")
+    parser.add_argument("--plot", metavar="PNG",
+                        help="write a figure: the heading of each record and the predictions")
 
 
 def handle(args: argparse.Namespace) -> int:
