@@ -99,6 +99,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    """Run ``marine bench`` as ``args`` ask; the exit code."""
     from ..benchmark import Grid, markdown_summary, run_grid, write_outputs, write_report
     from ..benchmark.grid import cell_key
     from ..benchmark.run import load_rows

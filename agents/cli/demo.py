@@ -39,6 +39,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    """Run ``marine demo`` as ``args`` ask; the exit code."""
     from ..demo import format_table, roll_reduction, run_demo
 
     seed = 0 if args.seed is None else args.seed  # --seed's default here

@@ -104,6 +104,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    """Run ``marine diagnose`` as ``args`` ask; the exit code."""
     from estimators.diagnosis import diagnose
     from estimators.diagnosis.api import expected_seconds, read_params
     from estimators.diagnosis.report import OWNED, owned_files

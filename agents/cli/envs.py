@@ -18,6 +18,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    """Run ``marine envs`` as ``args`` ask; the exit code."""
     import gymnasium as gym
 
     from marine_envs import ENVIRONMENTS

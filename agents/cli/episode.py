@@ -48,6 +48,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    """Run ``marine episode`` as ``args`` ask; the exit code."""
     from ..episode import run
 
     seed = 0 if args.seed is None else args.seed  # --seed's default here

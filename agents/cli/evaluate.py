@@ -37,6 +37,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    """Run ``marine evaluate`` as ``args`` ask; the exit code."""
     import numpy as np
 
     from .. import sb3

@@ -50,6 +50,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    """Run ``marine reproduce`` as ``args`` ask; the exit code."""
     from ..reproduce import run
 
     plot = common.plot_path(args.plot, args.force)

@@ -68,6 +68,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    """Run ``marine simulate`` as ``args`` ask; the exit code."""
     from marine_envs.recording import check_suffix, sidecar
 
     from ..simulate import record

@@ -69,6 +69,8 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def handle(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Run ``marine train`` as ``args`` ask (``parser`` reports a
+    misuse of its options); the exit code."""
     from .. import sb3
 
     if args.resume is not None:

@@ -45,6 +45,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def handle(args: argparse.Namespace) -> int:
+    """Run ``marine validate`` as ``args`` ask; the exit code."""
     from estimators.diagnosis.validation import validate
 
     out = common.output_file(args.json, args.force, "--json")
