@@ -15,31 +15,12 @@ from estimators import registry
 from marine_envs.provenance import save_figure
 
 from .evaluation import Episode, episode_metrics, run_episode
-from .lqr import LQRPolicy
-from .simulate import POLICIES, make_policy
+from .policies import canonical, make_policy, names
 
-EPISODE_POLICIES = (*POLICIES, "lqr-state")
+#: The policies ``marine episode --policy`` runs: every policy of :mod:`agents.policies`.
+EPISODE_POLICIES = names()
 #: Estimators ``marine episode --estimator`` can put between the sensors and the policy.
 EPISODE_ESTIMATORS = tuple(registry.ESTIMATORS)
-
-
-class OnTrueState:
-    """A policy fed the true state (``info["state"]``) instead of the observation: an oracle
-    baseline, the best an estimator could give the controller."""
-
-    def __init__(self, env: Any, policy: Any) -> None:
-        self.sim, self.policy = env.unwrapped.sim, policy
-
-    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
-                deterministic: bool = True):
-        return self.policy.predict(self.sim.x[0], state, episode_start, deterministic)
-
-
-def episode_policy(name: str, env: Any, seed: int | None) -> Any:
-    """A policy of :data:`EPISODE_POLICIES`: ``lqr-state`` is LQR on the true state."""
-    if name == "lqr-state":
-        return OnTrueState(env, LQRPolicy.for_env(env, observed=None))
-    return make_policy(name, env, seed)
 
 
 def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, seed: int = 0,
@@ -58,6 +39,7 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     :return: summary: return, cost, failed, RMS error of each weighted state and input (SI;
         angles in degrees), and with an estimator the RMS estimation error of every state.
     """
+    policy = canonical(policy)
     if estimator is not None and estimator not in EPISODE_ESTIMATORS:
         raise ValueError(f"estimator={estimator!r} is invalid: one of {EPISODE_ESTIMATORS}")
     if seconds is not None and not (math.isfinite(seconds) and seconds > 0):
@@ -70,7 +52,7 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
         from estimators import EstimatorWrapper
 
         env = EstimatorWrapper(env, registry.make(estimator, env))
-    episode = run_episode(env, episode_policy(policy, env, seed), steps, seed=seed)
+    episode = run_episode(env, make_policy(policy, env, seed), steps, seed=seed)
     if plot is not None:
         title = f"{env_id}, policy {policy}" + (f" on {estimator}" if estimator else "")
         plot_episode(episode, sim, f"{title}, seed {seed}", Path(plot),

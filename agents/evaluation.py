@@ -22,6 +22,8 @@ from numpy.typing import NDArray
 import marine_envs  # noqa: F401  (registers the environments)
 from estimators.registry import ORACLE, RAW, observe
 
+from .policies import ALIASES, LQR, POLICIES, canonical, make_policy, names
+
 FloatArray = NDArray[np.float64]
 
 
@@ -195,26 +197,27 @@ def episode_metrics(sim: Any, states: FloatArray, inputs: FloatArray, clipped: N
     return out
 
 
-# -- policies by name --------------------------------------------------------------------------
-
-class NominalInput:
-    """The vehicle's nominal (trim) input whatever it sees: the do-nothing baseline."""
-
-    def __init__(self, env: Any) -> None:
-        self.action = env.unwrapped.sim.nominal_action().astype(np.float32)
-
-    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
-                deterministic: bool = True) -> tuple[np.ndarray, None]:
-        obs = np.asarray(observation)
-        return np.broadcast_to(self.action, (*obs.shape[:-1], self.action.size)).copy(), None
-
+# -- policies --------------------------------------------------------------------------
 
 def lqr_for(venv: Any, estimator: str) -> Any:
     """The task's discrete LQR acting on what ``estimator`` gives (a name of
-    :func:`estimators.registry.observe`)."""
-    from .lqr import LQRPolicy
+    :func:`estimators.registry.observe`): the policy ``lqr`` of :mod:`agents.policies`."""
+    return make_policy(LQR, venv, estimator=estimator)
 
-    return LQRPolicy.for_env(venv, observed="state" if estimator == ORACLE else "auto")
+
+def _batched(policy: str | Callable[[Any], Any]) -> str | Callable[[Any], Any]:
+    """``policy``, a factory or the one name of a policy that acts on a batch of boats.
+
+    :raises ValueError: neither (before any work).
+    """
+    if callable(policy):
+        return policy
+    if isinstance(policy, str) and (policy in POLICIES or policy in ALIASES):
+        name = canonical(policy)
+        if POLICIES[name].batched:
+            return name
+    allowed = ", ".join(repr(name) for name in sorted(names(batched=True)))
+    raise ValueError(f"policy={policy!r} is invalid: {allowed} or a factory")
 
 
 # -- evaluation --------------------------------------------------------------------------------
@@ -243,25 +246,21 @@ def evaluate(env_id: str, policy: str | Callable[[Any], Any], estimator: str = R
              progress: Callable[[int], None] | None = None) -> list[dict[str, float]]:
     """Score ``policy`` on ``env_id`` behind ``estimator``, one episode per seed.
 
-    :param policy: ``"lqr"``, ``"nominal"``, or ``venv -> policy`` (e.g. an SB3 agent's
-        factory); the policy must take a batch of observations.
+    :param policy: the name of a policy that acts on a batch of boats (:mod:`agents.policies`:
+        ``"lqr"``, ``"nominal"``), or ``venv -> policy`` (e.g. an SB3 agent's factory); the
+        policy must take a batch of observations.
     :param estimator: a name of :func:`estimators.registry.observe`.
     :param seeds: the episodes' seeds (consecutive: one batch), or a count from 0.
     :return: one :func:`episode_metrics` dict per seed, with its ``seed``.
     """
+    policy = _batched(policy)
     seeds = list(range(seeds)) if isinstance(seeds, int) else list(seeds)
     if not seeds or seeds != list(range(seeds[0], seeds[0] + len(seeds))):
         raise ValueError(f"seeds={seeds!r} is invalid: consecutive integers (one batch)")
     steps = episode_steps(env_id, max_episode_steps)
     venv = make_env(env_id, len(seeds), estimator, env_kwargs, steps)
-    if policy == "lqr":
-        actor = lqr_for(venv, estimator)
-    elif policy == "nominal":
-        actor = NominalInput(venv)
-    elif callable(policy):
-        actor = policy(venv)
-    else:
-        raise ValueError(f"policy={policy!r} is invalid: 'lqr', 'nominal' or a factory")
+    actor = make_policy(policy, venv, estimator=estimator) if isinstance(policy, str) \
+        else policy(venv)
     result = rollout(venv, actor, steps, seeds[0], progress)
     sim = venv.unwrapped.sim
     estimated = estimator not in (ORACLE, RAW)

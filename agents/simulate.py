@@ -20,46 +20,16 @@ import pandas as pd
 import marine_envs  # noqa: F401  (registers the environments)
 from marine_envs.recording import APPLIED, CHUNK_ROWS, Recording, stream_recording
 
-from .excitation import SIGNALS, Dithered, RandomSteps
-from .lqr import LQRPolicy
+from .policies import LQR_STATE, canonical, make_policy, names
 
-POLICIES = (*SIGNALS, "lqr")
-
-
-#: Hold time of the dither on ``lqr``, s: the random steps the diagnosis's own generator uses.
-DITHER_HOLD = 2.0
+#: The policies a recording may run (:mod:`agents.policies`): all but the one that sees the true
+#: state, which a real experiment could not run.
+POLICIES = tuple(name for name in names() if name != LQR_STATE)
 #: Seeds the actuator position sensors' noise together with the run's seed: its own stream, so
 #: that recording an actuator changes nothing else in the run.
 ACTUATOR_NOISE_STREAM = 0x61637475
 #: Which inputs get an actuator position sensor: their names, or True for every input.
 ActuatorSensors = Sequence[str] | bool
-
-
-def make_policy(name: str, env: Any, seed: int | None, **options: float) -> Any:
-    """An excitation signal (``zero``, ``sine``, ``random``, ``prbs``) about the vehicle's
-    nominal input, or ``lqr`` for ``env``: with ``amplitude`` (a share of each actuator's half
-    range) and optionally ``hold`` (s), LQR plus a random-step dither on every input."""
-    if name == "lqr":
-        unknown = sorted(set(options) - {"amplitude", "hold"})
-        if unknown:
-            raise ValueError(f"policy 'lqr' takes amplitude and hold (a dither), not {unknown}")
-        lqr = LQRPolicy.for_env(env)
-        if not options.get("amplitude"):
-            if "hold" in options:
-                raise ValueError("policy 'lqr': a dither hold needs a dither amplitude")
-            return lqr
-        dither = RandomSteps(env.action_space.shape[0], env.unwrapped.dt, seed=seed,
-                             amplitude=options["amplitude"],
-                             hold=options.get("hold", DITHER_HOLD))
-        return Dithered(lqr, dither)
-    if name not in SIGNALS:
-        raise ValueError(f"unknown policy {name!r}; choose from {', '.join(POLICIES)}")
-    n_inputs = env.action_space.shape[0]
-    if name in ("random", "prbs"):
-        options = {**options, "seed": seed}
-    signal = SIGNALS[name](n_inputs, env.unwrapped.dt, **options)
-    signal.centre = env.unwrapped.sim.nominal_action()
-    return signal
 
 
 @dataclasses.dataclass
@@ -92,6 +62,9 @@ class _Run:
                  actuator_noise: float | Mapping[str, float] = 0.0) -> None:
         if steps < 2:
             raise ValueError(f"steps={steps!r} is invalid: a recording needs at least 2 steps")
+        policy = canonical(policy)  # the recording names the policy by its one name
+        if policy not in POLICIES:
+            raise ValueError(f"unknown policy {policy!r}; choose from {', '.join(POLICIES)}")
         self.env = gym.make(env_id, max_episode_steps=steps, **dict(env_kwargs or {}))
         sim = self.sim = self.env.unwrapped.sim
         names = sim.model.disturbance_names

@@ -13,10 +13,9 @@ from gymnasium.vector import SyncVectorEnv
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import marine_envs
-from agents.episode import OnTrueState
 from agents.evaluation import run_episode
 from agents.lqr import LQRPolicy
-from agents.simulate import make_policy
+from agents.policies import OnTrueState, make_policy
 from marine_envs import ENVIRONMENTS, MarineEnv, MarineVectorEnv
 from marine_envs.envs import task_weights
 from marine_envs.models.rov import THRUSTER_ALLOCATION
@@ -142,7 +141,7 @@ def test_lqr_on_the_true_state_does_the_task_better_than_doing_nothing(env_id):
     the task's weights) beats the neutral action, and keeps the vehicle alive."""
     env = gym.make(env_id, max_episode_steps=300)
     lqr = OnTrueState(env, LQRPolicy.for_env(env, observed=None))
-    idle = make_policy("zero", env, seed=None)  # the nominal input, open loop
+    idle = make_policy("nominal", env, seed=None)  # the nominal input, open loop
     controlled = run_episode(env, lqr, 300, seed=5)
     neutral = run_episode(env, idle, 300, seed=5)
     assert not controlled.terminated

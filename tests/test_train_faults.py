@@ -194,7 +194,7 @@ def test_a_truncated_or_corrupt_file_is_passed_over_and_named(killed, tmp_path, 
     # a newer checkpoint cut short, as a full disk left one before writes were atomic
     newer = last.with_name(f"model_{steps + 400}_steps.zip")
     shutil.copyfile(last, newer)
-    shutil.copyfile(sb3._statistics_of(last), sb3._statistics_of(newer))
+    shutil.copyfile(sb3.runs._statistics_of(last), sb3.runs._statistics_of(newer))
     _truncate(newer)
     code, out, err = run_cli(["train", "--resume", run, "--timesteps", steps + 200, "--quiet"],
                              capsys)

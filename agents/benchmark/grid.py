@@ -14,6 +14,8 @@ import numpy as np
 
 from estimators.registry import ESTIMATORS, ORACLE, RAW
 
+from ..policies import ALIASES, canonical, names
+
 VEHICLES = {"usv": "marine_envs/USV-v0", "hydrofoil": "marine_envs/Hydrofoil-v0",
             "rov": "marine_envs/ROV-v0", "dp": "marine_envs/DPVessel-v0",
             "hovercraft": "marine_envs/Hovercraft-v0"}
@@ -37,7 +39,9 @@ SEAS: dict[str, dict[str, dict[str, Any]]] = {
 #: ``dropout=p``: each sample lost with probability p; ``delay=n``: n control periods late.
 DEGRADATIONS = ("noise", "quant", "dropout", "delay")
 SB3_ALGOS = ("ppo", "sac", "td3", "a2c")
-CONTROLLERS = ("lqr", "nominal", *SB3_ALGOS)  # and "sb3:DIR" for a saved agent
+#: The policies of :mod:`agents.policies` that act on a batch of boats, and the SB3 algorithms
+#: the grid trains an agent of; and "sb3:DIR" for a saved agent.
+CONTROLLERS = (*sorted(names(batched=True)), *SB3_ALGOS)
 KEYS = ("vehicle", "estimator", "controller", "sea", "sensor")
 TRAINING_SEED = 10_000  # agents never train on the evaluation seeds 0, 1, ...
 
@@ -74,6 +78,9 @@ class Grid:
             unknown = [v for v in values if v not in known]
             if unknown:
                 raise ValueError(f"unknown {name}(s) {unknown}: choose from {', '.join(known)}")
+        if any(controller in ALIASES for controller in self.controllers):  # an old name
+            object.__setattr__(self, "controllers", tuple(
+                canonical(c) if c in ALIASES else c for c in self.controllers))
         for controller in self.controllers:
             if controller not in CONTROLLERS and not controller.startswith("sb3:"):
                 raise ValueError(f"unknown controller {controller!r}: one of "
