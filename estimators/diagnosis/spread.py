@@ -176,8 +176,6 @@ def coefficients(result: Fit) -> dict[str, tuple[float, float]]:
 
 def _form_derivative(result: Fit, target: str, count: int) -> list[dict[str, float]]:
     """d(standard form)/d(unknown) for the first ``count`` unknowns, by central differences."""
-    from .free_simulation import standard_form
-
     out = []
     for k in range(count):
         h = 1e-6 * max(abs(float(result.theta[k])), 1e-3)
