@@ -139,4 +139,3 @@ class ZigzagRudder:
         u = np.array(u, dtype=float)
         u[..., self.rudder_index] = self(np.asarray(x)[..., self.heading_index], dt)
         return u
-

@@ -156,7 +156,6 @@ class ZigzagResult:
         return _item(self.reversal_times, 2) - _item(self.reversal_times, 0)
 
 
-
 def zigzag(model: VehicleModel, amplitude: ArrayLike, switch: ArrayLike,
            speed: ArrayLike | None = None, duration: float | None = None, dt: float = 0.05,
            inputs: ArrayLike | None = None, *, first_direction: int = 1, turn_sign: int = 1,

@@ -137,4 +137,3 @@ def _si_units(vehicle: VehicleModel) -> dict[str, str]:
             **dict(zip(_applied_names(vehicle), vehicle.input_units, strict=True)),
             **dict(zip(vehicle.disturbance_names, vehicle.disturbance_units, strict=True)),
             **dict(zip(vehicle.output_names, vehicle.output_units, strict=True))}
-

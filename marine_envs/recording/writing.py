@@ -224,4 +224,3 @@ def _json_default(value: Any) -> Any:
         return value.tolist()
     raise TypeError(f"metadata value {value!r} of type {type(value).__name__} is not "
                     "JSON-serialisable")
-
