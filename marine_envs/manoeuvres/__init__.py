@@ -35,10 +35,10 @@ docs/models.md 5.3 (dt = 0.05 s). The rudder law lives in :mod:`~marine_envs.man
 the reading of a history in :mod:`~marine_envs.manoeuvres.reading`.
 """
 
-from .reading import TurnCriteria, ZigzagCriteria, read_turn, read_zigzag
+from .reading import TurnCriteria, ZigzagCriteria, ZigzagMetrics, read_turn, read_zigzag
 from .rudder import HEADING_NAMES, RUDDER_NAMES, ZigzagRudder, wrap_angle
 from .simulation import TurningResult, ZigzagResult, turning_circle, zigzag
 
 __all__ = ["HEADING_NAMES", "RUDDER_NAMES", "TurnCriteria", "TurningResult", "ZigzagCriteria",
-           "ZigzagResult", "ZigzagRudder", "read_turn", "read_zigzag", "turning_circle",
-           "wrap_angle", "zigzag"]
+           "ZigzagMetrics", "ZigzagResult", "ZigzagRudder", "read_turn", "read_zigzag",
+           "turning_circle", "wrap_angle", "zigzag"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -13,8 +14,32 @@ from numpy.typing import ArrayLike
 from ..models.base import FloatArray
 
 
+class ZigzagMetrics:
+    """What every zig-zag's criteria give in degrees, and the time to check yaw: a simulated
+    test's (:class:`~marine_envs.manoeuvres.ZigzagResult`, per boat) and those read off a
+    history (:class:`ZigzagCriteria`) alike."""
+
+    #: Radians to degrees for the values the class holds (numpy's for a batch's arrays).
+    _degrees = staticmethod(math.degrees)
+
+    @property
+    def first_overshoot_deg(self) -> Any:
+        """First overshoot angle, deg."""
+        return self._degrees(self.first_overshoot)
+
+    @property
+    def second_overshoot_deg(self) -> Any:
+        """Second overshoot angle, deg."""
+        return self._degrees(self.second_overshoot)
+
+    @property
+    def time_to_check_yaw(self) -> Any:
+        """Time from the second execute to the first overshoot peak, s."""
+        return self.first_peak_time - self.initial_turning_time
+
+
 @dataclasses.dataclass(frozen=True)
-class ZigzagCriteria:
+class ZigzagCriteria(ZigzagMetrics):
     """A zig-zag's standard criteria read off a heading and rudder history (a record or a
     simulation alike: :func:`read_zigzag`), with the test's settings as the history shows them.
     Angles in rad, times in s from the first execute; criteria the history does not reach are NaN.
@@ -32,21 +57,6 @@ class ZigzagCriteria:
     first_overshoot: float  #: rad
     second_overshoot: float  #: rad
     first_peak_time: float  #: s
-
-    @property
-    def first_overshoot_deg(self) -> float:
-        """First overshoot angle, deg."""
-        return math.degrees(self.first_overshoot)
-
-    @property
-    def second_overshoot_deg(self) -> float:
-        """Second overshoot angle, deg."""
-        return math.degrees(self.second_overshoot)
-
-    @property
-    def time_to_check_yaw(self) -> float:
-        """Time from the second execute to the first overshoot peak, s."""
-        return self.first_peak_time - self.initial_turning_time
 
 
 def read_zigzag(time: ArrayLike, heading: ArrayLike, rudder: ArrayLike) -> ZigzagCriteria:

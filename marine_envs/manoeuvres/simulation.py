@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike
 
 from ..models.base import FloatArray, VehicleModel
 from ..models.integrate import rk4
-from .reading import _item, _peak
+from .reading import ZigzagMetrics, _item, _peak
 from .rudder import HEADING_NAMES, RUDDER_NAMES, ZigzagRudder, _index
 
 
@@ -94,8 +94,13 @@ def _batch(*values: ArrayLike | None) -> tuple[int, bool]:
     return (shape[0] if shape else 1), not shape
 
 
+def _in_degrees(name: str, doc: str) -> property:
+    """A read-only property: the angle (rad) or rate (rad/s) ``name`` in degrees, per boat."""
+    return property(lambda self: np.degrees(getattr(self, name)), doc=doc)
+
+
 @dataclasses.dataclass(frozen=True)
-class ZigzagResult:
+class ZigzagResult(ZigzagMetrics):
     """Time histories and metrics of a zig-zag test (definitions in
     :mod:`marine_envs.manoeuvres`).
 
@@ -116,16 +121,7 @@ class ZigzagResult:
     second_overshoot: Any  #: rad
     first_peak_time: Any  #: s
     max_heading: Any  #: largest |heading change| over the run, rad
-
-    @property
-    def first_overshoot_deg(self) -> Any:
-        """First overshoot angle, deg."""
-        return np.degrees(self.first_overshoot)
-
-    @property
-    def second_overshoot_deg(self) -> Any:
-        """Second overshoot angle, deg."""
-        return np.degrees(self.second_overshoot)
+    _degrees = staticmethod(np.degrees)
 
     @property
     def first_peak(self) -> Any:
@@ -133,20 +129,8 @@ class ZigzagResult:
         heading" of docs/models.md 5.3)."""
         return self.switch + self.first_overshoot
 
-    @property
-    def first_peak_deg(self) -> Any:
-        """First peak heading change, deg."""
-        return np.degrees(self.first_peak)
-
-    @property
-    def max_heading_deg(self) -> Any:
-        """Largest |heading change| over the run, deg."""
-        return np.degrees(self.max_heading)
-
-    @property
-    def time_to_check_yaw(self) -> Any:
-        """Time from the second execute to the first overshoot peak, s."""
-        return self.first_peak_time - self.initial_turning_time
+    first_peak_deg = _in_degrees("first_peak", "First peak heading change, deg.")
+    max_heading_deg = _in_degrees("max_heading", "Largest |heading change| over the run, deg.")
 
     @property
     def period(self) -> Any:
@@ -269,15 +253,8 @@ class TurningResult:
     tactical_diameter: Any  #: transfer at 180 deg heading change, m
     steady: Any  #: True when r changed by < 0.1 % over the last 10 % of the run
 
-    @property
-    def yaw_rate_deg(self) -> Any:
-        """Steady yaw rate, deg/s."""
-        return np.degrees(self.yaw_rate)
-
-    @property
-    def drift_angle_deg(self) -> Any:
-        """Steady drift angle, deg."""
-        return np.degrees(self.drift_angle)
+    yaw_rate_deg = _in_degrees("yaw_rate", "Steady yaw rate, deg/s.")
+    drift_angle_deg = _in_degrees("drift_angle", "Steady drift angle, deg.")
 
 
 def _at_heading(change: FloatArray, values: FloatArray, target: float) -> float:
