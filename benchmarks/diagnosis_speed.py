@@ -51,11 +51,10 @@ from _common import (  # noqa: E402
     check_page_path,
     chosen_names,
 )
-from real_recordings import (  # noqa: E402
+from _real_recordings.records import (  # noqa: E402
     REPO,
     ZIGZAG_DIR,
     ZIGZAGS,
-    read_hsva_zigzag,
     shipped_decay,
     shipped_hovercraft,
 )
@@ -66,6 +65,7 @@ from estimators.diagnosis.synthetic import DEFAULT_DITHER_SHARE, DITHER_SHARE  #
 from estimators.ekf import ExtendedKalmanFilter  # noqa: E402
 from marine_envs.files import write_json  # noqa: E402
 from marine_envs.models import get_model  # noqa: E402
+from marine_envs.readers import read_hsva_zigzag  # noqa: E402
 from marine_envs.recording import Recording  # noqa: E402
 
 TITLE = "Diagnosis run time"

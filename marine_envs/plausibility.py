@@ -16,6 +16,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .units import UNIT_CONVERSIONS
+
 if TYPE_CHECKING:
     from .models import VehicleModel
 
@@ -200,8 +202,6 @@ def degree_slip(ratio: float | None) -> bool:
 
 def _unit_hint(si_unit: str, declared: str, peak: float, bound: float) -> str:
     """The likeliest unit mistake behind ``peak`` beyond ``bound`` (SI units)."""
-    from .recording import UNIT_CONVERSIONS  # here: recording imports this module
-
     if declared == si_unit:
         # a unit whose conversion brings the peak to a tenth of the bound or more, within
         # it; the smallest change first

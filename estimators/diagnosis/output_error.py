@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize, signal
 
+from marine_envs import compiled
 from marine_envs.compiled import first_use, jit
 from marine_envs.models import VehicleModel
 from marine_envs.models.effects import Effect, applied_inputs, state_term
@@ -418,60 +419,53 @@ def _free_runs(core: Callable[..., None]) -> Callable[..., None]:
     ``f(X0, U, D, P, code, C, h, substeps, OUT)`` writes to ``OUT[b, k]`` the state of row
     ``b`` at sample ``k`` (from ``X0[b]``, inputs ``U[b or 0, k]`` held over each sample,
     constants ``P[b or 0]``, the terms ``code`` (kind, target, source) with coefficients
-    ``C[b]``). Made once per process, compiled once per machine."""
+    ``C[b]``), each sample ``substeps`` steps of :func:`marine_envs.compiled.rk4`, the
+    environments' integrator. Made once per process, compiled once per machine."""
+    advance = compiled.rk4(_with_terms(core))
 
     @jit
     def free_runs(X0, U, D, P, code, C, h, substeps, OUT):
-        n = X0.shape[1]
-        x, z = np.empty(n), np.empty(n)
-        k, total = np.empty(n), np.empty(n)
+        work = np.empty((3, X0.shape[1]))
         for b in range(X0.shape[0]):
-            p = P[0] if P.shape[0] == 1 else P[b]
+            terms = (P[0] if P.shape[0] == 1 else P[b], code, C[b])
             inputs = U[0] if U.shape[0] == 1 else U[b]
-            for i in range(n):
-                x[i] = X0[b, i]
-            for step in range(OUT.shape[1]):
-                for i in range(n):
-                    OUT[b, step, i] = x[i]
-                u = inputs[step]
-                for _ in range(substeps):
-                    for i in range(n):
-                        z[i] = x[i]
-                    for stage in range(4):
-                        core(z, u, D, p, k)
-                        for j in range(code.shape[0]):
-                            target, source = z[code[j, 1]], z[code[j, 2]]
-                            kind = code[j, 0]
-                            if kind == 0:
-                                term = 1.0
-                            elif kind == 1:
-                                term = target
-                            elif kind == 2:
-                                term = target * abs(target)
-                            elif kind == 3:
-                                term = target**3
-                            elif kind == 4:
-                                term = source
-                            else:
-                                term = source**3
-                            k[code[j, 1]] += C[b, j] * term
-                        if stage == 0:
-                            for i in range(n):
-                                total[i] = k[i]
-                        elif stage == 3:
-                            for i in range(n):
-                                total[i] += k[i]
-                        else:
-                            for i in range(n):
-                                total[i] += 2 * k[i]
-                        if stage < 3:
-                            ahead = 0.5 * h if stage < 2 else h
-                            for i in range(n):
-                                z[i] = x[i] + ahead * k[i]
-                    for i in range(n):
-                        x[i] = x[i] + h / 6 * total[i]
+            for k in range(OUT.shape[1]):  # (no sample: nothing written)
+                if k == 0:
+                    for i in range(X0.shape[1]):
+                        OUT[b, 0, i] = X0[b, i]
+                else:
+                    advance(OUT[b, k - 1], inputs[k - 1], D, terms, h, substeps, OUT[b, k], work)
 
     return free_runs
+
+
+def _with_terms(core: Callable[..., None]) -> Callable[..., None]:
+    """``core`` with catalogue state terms added to its derivative: ``f(x, u, d, terms, out)``
+    with ``terms = (p, code, c)``, the model's constants ``p`` and the terms ``code`` (kind,
+    target, source; :data:`_TERM_CODES`) with coefficients ``c``."""
+
+    @jit
+    def with_terms(x, u, d, terms, out):
+        p, code, c = terms
+        core(x, u, d, p, out)
+        for j in range(code.shape[0]):
+            target, source = x[code[j, 1]], x[code[j, 2]]
+            kind = code[j, 0]
+            if kind == 0:
+                term = 1.0
+            elif kind == 1:
+                term = target
+            elif kind == 2:
+                term = target * abs(target)
+            elif kind == 3:
+                term = target**3
+            elif kind == 4:
+                term = source
+            else:
+                term = source**3
+            out[code[j, 1]] += c[j] * term
+
+    return with_terms
 
 
 class _affine:
