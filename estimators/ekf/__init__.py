@@ -18,3 +18,7 @@ from .smoother import FilterResult, SmootherResult, rts_smooth
 
 __all__ = ["Dynamics", "ExtendedKalmanFilter", "FilterResult", "FloatArray", "Jacobian",
            "SmootherResult", "rts_smooth"]
+
+# documented (and pickled) where they are imported from: this package, not its modules
+for _public in (ExtendedKalmanFilter, FilterResult, SmootherResult, rts_smooth):
+    _public.__module__ = __name__

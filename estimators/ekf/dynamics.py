@@ -4,7 +4,7 @@ parameters entering through the packed constants ``q``, set for each filter.
 
 No vehicle is known here: a model with compiled equations runs compiled without parameters, and
 with parameters where the model declares how they enter its constants
-(:meth:`~marine_envs.models.VehicleModel.compiled_parameters`, e.g. the ROV's hydrodynamic
+(:meth:`~marine_envs.models.base.VehicleModel.compiled_parameters`, e.g. the ROV's hydrodynamic
 coefficients).
 """
 
@@ -52,7 +52,7 @@ def compiled_dynamics(model: VehicleModel, parameters: Sequence[str]) -> Compile
     """The compiled dynamics of ``model`` with ``parameters`` estimated, or None when there are
     none: the model has no compiled equations (or its ``rhs`` is not theirs, or its constants
     are per batch row), or it declares no compiled form of those parameters
-    (:meth:`~marine_envs.models.VehicleModel.compiled_parameters`)."""
+    (:meth:`~marine_envs.models.base.VehicleModel.compiled_parameters`)."""
     equations = type(model).equations
     if equations is None or type(model).rhs is not VehicleModel.rhs:
         return None

@@ -12,10 +12,11 @@ update is in Joseph form and symmetrised. The morphing-robot patent, the DP wave
 and the hovercraft EKF paper all identify parameters this way: hydrodynamic coefficients, wave
 frequencies and manoeuvring derivatives.
 
-A filter made by :meth:`ExtendedKalmanFilter.from_model` of a model with compiled equations runs
-predict and update compiled, filter by filter (:mod:`estimators.ekf.kernels`: the same filter;
-on the joint ROV benchmark 12x faster for one filter, 2.5x to 3x for batches of 64 to 1024); the
-numpy code here serves dynamics given as Python callables and outputs that are not states.
+A filter made by :meth:`~estimators.ekf.ExtendedKalmanFilter.from_model` of a model with
+compiled equations runs predict and update compiled, filter by filter
+(:mod:`estimators.ekf.kernels`: the same filter; on the joint ROV benchmark 12x faster for one
+filter, 2.5x to 3x for batches of 64 to 1024); the numpy code here serves dynamics given as
+Python callables and outputs that are not states.
 """
 
 from __future__ import annotations
@@ -55,7 +56,8 @@ class ExtendedKalmanFilter(Estimator):
     """A batch of ``N`` extended Kalman filters sharing one model; parameters may be appended to
     the state.
 
-    :param f: continuous-time dynamics of the model states (see :data:`Dynamics`), vectorised.
+    :param f: continuous-time dynamics of the model states (see
+        :data:`~estimators.ekf.filter.Dynamics`), vectorised.
     :param h: the measurement: a matrix ``H`` ``(m, n)`` (``y = H x``) or a vectorised callable
         ``h(x (N, n)) -> (N, m)`` (linearised by central differences at each update).
     :param dt: nominal period of :meth:`predict`, s.
@@ -69,8 +71,8 @@ class ExtendedKalmanFilter(Estimator):
         unit per sqrt(s): a prediction over ``dt`` adds ``parameter_noise**2 * dt`` to its
         variance. It lets the estimate follow a parameter that changes (and keeps the filter from
         "saturating" on old data); 0 (default) = constant parameters.
-    :param jacobian: analytic Jacobians (see :data:`Jacobian`); default: central differences of
-        ``f`` over ``[x; theta]`` in one batched call.
+    :param jacobian: analytic Jacobians (see :data:`~estimators.ekf.filter.Jacobian`); default:
+        central differences of ``f`` over ``[x; theta]`` in one batched call.
     :param parameter_jacobian: ``df/dtheta (N, n, p) = parameter_jacobian(x, u, theta)`` alone
         (e.g. exact regressors of parameters that enter linearly); the differences then cover
         ``x`` only.

@@ -1,5 +1,6 @@
-"""What an offline run of the extended Kalman filter gives (:class:`FilterResult`), and the
-Rauch-Tung-Striebel smoother over it (:func:`rts_smooth`)."""
+"""What an offline run of the extended Kalman filter gives
+(:class:`~estimators.ekf.FilterResult`), and the Rauch-Tung-Striebel smoother over it
+(:func:`~estimators.ekf.rts_smooth`)."""
 
 from __future__ import annotations
 
@@ -60,7 +61,7 @@ class SmootherResult:
 def rts_smooth(result: FilterResult) -> SmootherResult:
     """Rauch-Tung-Striebel smoothing of a forward run: ``C_k = P_k Phi_k' P_pred_{k+1}^-1``,
     ``x_s,k = x_k + C_k (x_s,k+1 - x_pred,k+1)``, ``P_s,k = P_k + C_k (P_s,k+1 - P_pred,k+1) C_k'``;
-    compiled (:func:`rts_loop`) for a finite run, the numpy loop below
+    compiled (:func:`~estimators.ekf.smoother.rts_loop`) for a finite run, the numpy loop below
     (the reference) otherwise.
     """
     arrays = (result.x, result.P, result.x_pred, result.P_pred, result.transition)
@@ -81,7 +82,7 @@ def rts_smooth(result: FilterResult) -> SmootherResult:
 
 @jit
 def rts_loop(x, P, x_pred, P_pred, transition, x_out, P_out):
-    """The Rauch-Tung-Striebel recursion of :func:`rts_smooth` over a finite
+    """The Rauch-Tung-Striebel recursion of :func:`~estimators.ekf.rts_smooth` over a finite
     forward run of ``N`` filters (``x`` ``(T, N, n)``, ``P`` ``(T, N, n, n)``, ...), written to
     ``x_out`` and ``P_out``: the same solve and products, without a Python step per sample."""
     T, N, n = x.shape

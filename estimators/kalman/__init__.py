@@ -29,3 +29,7 @@ from .filter import KalmanFilter
 __all__ = ["AdaptiveKalmanFilter", "KalmanFilter", "default_measurement_noise",
            "default_process_noise", "held_noise_covariance", "linearised_model",
            "wrapped_channel_names"]
+
+# documented (and pickled) where they are imported from: this package, not its modules
+for _name in __all__:
+    globals()[_name].__module__ = __name__

@@ -1,8 +1,8 @@
 """The ROV's hydrodynamic coefficients as parameters of its compiled equations: what an
 estimator that appends them to the state needs to run on the compiled equations
 (:meth:`ROVModel.compiled_parameters <marine_envs.models.rov.ROVModel.compiled_parameters>`,
-read by :mod:`estimators.ekf.dynamics`): how each filter's packed constants follow its
-coefficients, and their exact Jacobian.
+read by the estimators' compiled extended Kalman filter): how each filter's packed constants
+follow its coefficients, and their exact Jacobian.
 """
 
 from __future__ import annotations
@@ -25,8 +25,9 @@ INPUT_STEP = 1e3
 
 def coefficient_parameters(model: ROVModel, names: tuple[str, ...]) -> CompiledParameters | None:
     """The ROV's equations with hydrodynamic coefficients ``names`` estimated, as
-    :meth:`ROVModel.rhs_with` defines them: a coefficient's value is its value at the current
-    shape, i.e. the model in which it is the same in cruise and work shape.
+    :meth:`ROVModel.rhs_with <marine_envs.models.rov.ROVModel.rhs_with>` defines them: a
+    coefficient's value is its value at the current shape, i.e. the model in which it is the
+    same in cruise and work shape.
 
     The packed constants of such a model are affine in the coefficients (the forces are linear
     in them, the mass matrix does not hold them), so each filter's are ``q_0 + D (theta -
@@ -92,9 +93,10 @@ def _shape_free(model: ROVModel, names: tuple[str, ...], values: FloatArray) -> 
 
 def _coefficient_layout(model: ROVModel, names: tuple[str, ...]
                         ) -> tuple[NDArray[np.int64], NDArray[np.int64]] | None:
-    """The feature (row of :meth:`ROVModel.features`) and the force each coefficient's regressor
-    is (:meth:`ROVModel.hydrodynamic_regressors`), found on random states with a current; None
-    unless each is exactly one feature in one force."""
+    """The feature (row of :meth:`~marine_envs.models.rov.ROVModel.features`) and the force
+    each coefficient's regressor is
+    (:meth:`~marine_envs.models.rov.ROVModel.hydrodynamic_regressors`), found on random states
+    with a current; None unless each is exactly one feature in one force."""
     rng = np.random.default_rng(0)
     x = rng.normal(0.0, 0.5, (4, len(model.state_names)))
     d = np.column_stack([rng.normal(0.0, 0.3, (4, 3)), rng.uniform(0.0, 1.0, 4)])
@@ -116,7 +118,7 @@ def _coefficient_layout(model: ROVModel, names: tuple[str, ...]
 @jit
 def _affine_constants(theta, table, q):
     """``q = q_0 + D (theta - theta_0)`` on the constants that change (``table``: see
-    :func:`_coefficient_tables`)."""
+    ``_coefficient_tables``)."""
     floats, ints = table
     p, changing = theta.size, ints[0]
     index_at, start_at = 1 + 2 * p, 1 + 2 * p + changing
