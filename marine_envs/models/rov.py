@@ -508,7 +508,7 @@ class ROVModel(VehicleModel):
             return None
         from .rov_coefficients import coefficient_parameters  # (it imports this module)
 
-        return coefficient_parameters(self, tuple(names))
+        return coefficient_parameters(self, tuple(names), rov_features, MORPHING)
 
     def _batch_with(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,
                     values: list[ArrayLike]):

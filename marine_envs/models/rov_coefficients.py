@@ -2,7 +2,8 @@
 estimator that appends them to the state needs to run on the compiled equations
 (:meth:`ROVModel.compiled_parameters <marine_envs.models.rov.ROVModel.compiled_parameters>`,
 read by the estimators' compiled extended Kalman filter): how each filter's packed constants
-follow its coefficients, and their exact Jacobian.
+follow its coefficients, and their exact Jacobian. What it needs of the ROV's module (its
+compiled features, its morphing coefficients) is handed in: it imports none of it.
 """
 
 from __future__ import annotations
@@ -14,16 +15,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..compiled import jit, local_array
-from .base import CompiledParameters, FloatArray
-from .rov import ROVModel, rov_features
-from .rov import _shape_free as shape_free
+from .base import CompiledParameters, FloatArray, VehicleModel
 
 #: Input step of the differences of a model's equations in its inputs (affine there: exact
 #: for any step; a large one keeps the rounding of the equations' value out), input units.
 INPUT_STEP = 1e3
 
 
-def coefficient_parameters(model: ROVModel, names: tuple[str, ...]) -> CompiledParameters | None:
+def coefficient_parameters(model: VehicleModel, names: tuple[str, ...],
+                           features: Callable[..., None], morphing: tuple[str, ...]
+                           ) -> CompiledParameters | None:
     """The ROV's equations with hydrodynamic coefficients ``names`` estimated, as
     :meth:`ROVModel.rhs_with <marine_envs.models.rov.ROVModel.rhs_with>` defines them: a
     coefficient's value is its value at the current shape, i.e. the model in which it is the
@@ -36,21 +37,25 @@ def coefficient_parameters(model: ROVModel, names: tuple[str, ...]) -> CompiledP
     coefficient in one force row, and the equations are affine in the forces, so one difference
     per force is ``M(s)^-1`` to rounding.
 
+    :param model: an ROV model (:class:`~marine_envs.models.rov.ROVModel`).
+    :param features: its compiled features ``features(x, u, d, F)`` (the regressors' rows).
+    :param morphing: the coefficients that change with the shape (a ``work_`` value each).
     :return: None when a coefficient's regressor is not one feature, or a variant is refused.
     """
-    made = _coefficient_tables(type(model), model.params, names)
+    made = _coefficient_tables(type(model), model.params, names, morphing)
     if made is None:
         return None
     constants, table = made
     n, n_u = len(model.state_names), len(model.input_names)
     n_features = model.features(model.x0).shape[-1]
     return CompiledParameters(_affine_constants,
-                              _coefficient_jacobian(type(model).equations.core, n, n_u,
+                              _coefficient_jacobian(type(model).equations.core, features, n, n_u,
                                                     n_features), constants, table)
 
 
 @functools.lru_cache(maxsize=16)
-def _coefficient_tables(kind: type[ROVModel], params: object, names: tuple[str, ...]
+def _coefficient_tables(kind: type[VehicleModel], params: object, names: tuple[str, ...],
+                        morphing: tuple[str, ...]
                         ) -> tuple[FloatArray, tuple[FloatArray, NDArray[np.int64]]] | None:
     """``(q_0, table)`` of :func:`coefficient_parameters` for the model ``kind(params)``.
 
@@ -60,14 +65,14 @@ def _coefficient_tables(kind: type[ROVModel], params: object, names: tuple[str, 
     model = kind(params)
     layout = _coefficient_layout(model, names)
     theta0 = np.array([getattr(model.params, k) for k in names], dtype=float)
-    base = _shape_free(model, names, theta0)
+    base = _shape_free(model, names, theta0, morphing)
     if layout is None or base is None:
         return None
     q0 = np.asarray(base.constants, dtype=float)
     columns = []
     for j in range(len(names)):
         step = -max(1.0, abs(theta0[j]))  # more dissipative: a variant the model accepts
-        moved = _shape_free(model, names, theta0 + step * np.eye(len(names))[j])
+        moved = _shape_free(model, names, theta0 + step * np.eye(len(names))[j], morphing)
         if moved is None:
             return None
         columns.append((np.asarray(moved.constants) - q0) / step)
@@ -82,16 +87,22 @@ def _coefficient_tables(kind: type[ROVModel], params: object, names: tuple[str, 
     return q0, (floats, ints.astype(np.int64))
 
 
-def _shape_free(model: ROVModel, names: tuple[str, ...], values: FloatArray) -> ROVModel | None:
+def _shape_free(model: VehicleModel, names: tuple[str, ...], values: FloatArray,
+                morphing: tuple[str, ...]) -> VehicleModel | None:
     """``model`` with coefficients ``names`` at ``values`` in cruise and work shape; None when
     the model refuses them."""
+    changes = {}
+    for name, value in zip(names, values.tolist(), strict=True):
+        changes[name] = value
+        if name in morphing:  # the value at the current shape: the same in cruise and work
+            changes[f"work_{name}"] = value
     try:
-        return model.with_params(**shape_free(dict(zip(names, values.tolist(), strict=True)), {}))
+        return model.with_params(**changes)
     except ValueError:
         return None
 
 
-def _coefficient_layout(model: ROVModel, names: tuple[str, ...]
+def _coefficient_layout(model: VehicleModel, names: tuple[str, ...]
                         ) -> tuple[NDArray[np.int64], NDArray[np.int64]] | None:
     """The feature (row of :meth:`~marine_envs.models.rov.ROVModel.features`) and the force
     each coefficient's regressor is
@@ -132,7 +143,8 @@ def _affine_constants(theta, table, q):
 
 
 @functools.cache
-def _coefficient_jacobian(core: Callable[..., None], n: int, n_u: int, n_features: int
+def _coefficient_jacobian(core: Callable[..., None], features: Callable[..., None], n: int,
+                          n_u: int, n_features: int
                           ) -> Callable[..., None]:
     """The parameter Jacobian of :func:`coefficient_parameters` for equations ``core`` of ``n``
     states, ``n_u`` inputs and ``n_features`` features."""
@@ -143,7 +155,7 @@ def _coefficient_jacobian(core: Callable[..., None], n: int, n_u: int, n_feature
         ints = table[1]
         p = A.shape[1] - n
         F, v, values = local_array(n_features), local_array(n_u), local_array(n_values)
-        rov_features(x, u, d, F)
+        features(x, u, d, F)
         for k in range(n_u):
             v[k] = u[k]
         for k in range(n_u + 1):  # one call site: the equations are merged in once
