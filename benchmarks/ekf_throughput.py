@@ -5,7 +5,7 @@ Measured: env-updates per second, i.e. ``predict`` + ``update`` pairs times the 
 filters over the wall time, of :class:`~estimators.ekf.ExtendedKalmanFilter` on the ROV model
 (central-difference state Jacobian and exact parameter Jacobian over the 31-dimensional
 augmented state, RK4 mean) with DVL, gyro and depth measurements (10 channels) at 10 Hz, on both
-of its paths: the compiled one (:mod:`estimators.ekf_compiled`, what ``from_model`` gives) and
+of its paths: the compiled one (:mod:`estimators.ekf.kernels`, what ``from_model`` gives) and
 the numpy one (``compiled=False``, the reference, which the compiled path replaced). The data: one
 closed-loop run of ROV-v0 under LQR on the true state through the morph, with a fresh noise
 realisation per filter. Rows: one filter (``N=1``) in a Python loop, the reference of the ratio;
@@ -66,7 +66,7 @@ time) of `estimators.ekf.ExtendedKalmanFilter` estimating the ROV's 13 states an
 morphing-robot patent's 18 drag coefficients jointly (31 states, 10 measured channels: DVL,
 gyro, depth, at 10 Hz), on a closed-loop record of ROV-v0 under LQR through the morph with a
 fresh noise realisation per filter. Both of its paths are timed in the same run: the compiled
-one (`estimators.ekf_compiled`, what `from_model` gives) and the numpy one it replaced. The
+one (`estimators.ekf.kernels`, what `from_model` gives) and the numpy one it replaced. The
 ratios are the result: "vs loop" to one filter of the same path run in a Python loop, "vs numpy"
 to the numpy path at the same N; absolute rates on a shared machine are not. Each figure is the
 best of interleaved repeats, on one BLAS thread and one CPU. The checks: a batch's rows equal

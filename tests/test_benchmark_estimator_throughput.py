@@ -13,8 +13,8 @@ def test_checks_pass_on_small_sizes():
     checks = [bench.batch_vs_single(system, adaptive=False, batch=64, steps=40, rows=4),
               bench.batch_vs_single(system, adaptive=True, batch=64, steps=40, rows=4),
               bench.ours_vs_filterpy(system, steps=50),
-              bench.compiled_vs_numpy(system, adaptive=False, batch=32, steps=60),
-              bench.compiled_vs_numpy(system, adaptive=True, batch=32, steps=60),
+              bench.shared_vs_alone(system, adaptive=False, batch=32, steps=60),
+              bench.shared_vs_alone(system, adaptive=True, batch=32, steps=60),
               bench.float32_batch(50, 50),
               bench.float32_sequential(300, chunk=128)]
     assert all(c["passed"] for c in checks), bench.format_checks(checks)

@@ -225,3 +225,39 @@ def test_unscented_filter_identifies_and_smooths():
     truth = simulate_truth(us)
     assert np.abs(sm.x[20:, 0, 1] - truth[20:, 1]).mean() < \
         np.abs(sm.filtered.x[20:, 0, 1] - truth[20:, 1]).mean()
+
+
+def test_a_saturated_reading_is_taken_as_missing():
+    """A reading at the sensor's full scale says only that the value is beyond it: no gain."""
+    ekf = oscillator_ekf(batch_size=2, sensor_range=([-0.5], [0.5]))
+    before = ekf.x.copy(), ekf.P.copy()
+    ekf.update(np.array([[0.5], [0.49]]))
+    np.testing.assert_array_equal(ekf.x[0], before[0][0])
+    np.testing.assert_array_equal(ekf.P[0], before[1][0])
+    assert ekf.dof.tolist() == [0, 1] and ekf.x[1, 0] > 0.4
+    with pytest.raises(ValueError, match="sensor_range"):
+        oscillator_ekf(sensor_range=([0.5], [-0.5]))
+
+
+def test_rov_filter_under_full_random_thrust_stays_finite_and_in_the_model_domain():
+    """ROV-v0 under uniform random actions in [-1.2, 1.2] (seed 11): its roll rate passes the
+    gyro's full scale (1.57 rad/s) at step 16. Read as a measurement, the clipped value pulled
+    the unmeasured morph fraction out of [0, 1], where the model's coefficients are
+    extrapolated, and the estimate overflowed to NaN at step 31; a saturated reading is now
+    missing, and the estimate stays finite with the morph fraction near its true 0."""
+    import gymnasium as gym
+
+    import marine_envs  # noqa: F401
+    from estimators.registry import observe
+
+    env = observe(gym.make("marine_envs/ROV-v0", disable_env_checker=True), "ekf")
+    rng = np.random.default_rng(11)
+    obs, _ = env.reset(seed=11)
+    saturated = 0
+    for _ in range(60):
+        action = rng.uniform(-1.2, 1.2, env.action_space.shape).astype(np.float32)
+        obs, _, _, _, info = env.step(action)
+        saturated += env.estimator.dof[0] < np.sum(info.get("measurement_mask", True))
+        assert np.isfinite(obs).all()
+        assert abs(info["estimate"][12]) < 0.1  # the morph fraction: truly 0
+    assert saturated > 0  # the case did arise

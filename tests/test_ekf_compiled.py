@@ -1,4 +1,4 @@
-"""The compiled path of the extended Kalman filter (estimators.ekf_compiled): the estimates of the
+"""The compiled path of the extended Kalman filter (estimators.ekf.kernels): the estimates of the
 numpy path it replaced (saved from commit 97dcd08 on the EKF benchmark's record, and the numpy
 path run beside it), its pieces against their definitions, and what it does with missing data,
 diverging filters and models it cannot compile."""
@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from estimators import ekf_compiled
-from estimators.ekf import ExtendedKalmanFilter
+from estimators.ekf import ExtendedKalmanFilter, kernels
+from estimators.ekf import dynamics as ekf_dynamics
 from estimators.identification import Segment, identify_ekf
 from marine_envs.models import get_model
 from marine_envs.models.rov import SEED_COEFFICIENTS, ROVModel
@@ -97,7 +97,7 @@ def random_states(model, n, seed):
 
 def test_coefficient_dynamics_are_rhs_with_and_their_jacobian_is_exact():
     model = ROVModel()
-    dynamics = ekf_compiled.compiled_dynamics(model, SEED_COEFFICIENTS)
+    dynamics = ekf_dynamics.compiled_dynamics(model, SEED_COEFFICIENTS)
     x, u, d, theta = random_states(model, 12, 0)
     q = dynamics.constants.copy()
     values = dict(zip(SEED_COEFFICIENTS, theta.T, strict=True))
@@ -122,7 +122,7 @@ def test_transition_rows_are_the_exponential_of_the_augmented_jacobian(scale):
     skewed = np.triu(rng.normal(0, 50 * scale, (13, 13)), 1) + np.diag(rng.normal(0, 1, 13))
     for jac in (A, np.hstack([skewed, A[:, 13:]])):
         T = np.empty((13, 31))
-        ekf_compiled.transition_rows(jac, 0.1, T, np.empty((10, 13, 13)), np.empty((2, 13, 31)))
+        kernels.transition_rows(jac, 0.1, T, np.empty((10, 13, 13)), np.empty((2, 13, 31)))
         augmented = np.zeros((31, 31))
         augmented[:13] = jac * 0.1
         exact = scipy.linalg.expm(augmented)[:13]

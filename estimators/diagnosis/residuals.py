@@ -44,7 +44,7 @@ from marine_envs.models.integrate import rk4
 from marine_envs.recording import Recording
 
 from ..ekf import ExtendedKalmanFilter
-from ..ekf_compiled import CompiledDynamics, no_parameters, same_constants
+from ..ekf.dynamics import CompiledDynamics, no_parameters, same_constants
 from .innovations import Innovations, c_array
 
 FloatArray = NDArray[np.float64]
@@ -735,7 +735,7 @@ SAME_DYNAMICS = 1e-12
 
 
 def compiled_augmented(dynamics: AugmentedDynamics) -> CompiledDynamics | None:
-    """``dynamics`` as the compiled filter's kernels take them (:mod:`estimators.ekf_compiled`:
+    """``dynamics`` as the compiled filter's kernels take them (:mod:`estimators.ekf.kernels`:
     one boat's ``f(z, u, d, q, out)`` and its constants ``q``), so that the diagnosis's filter
     predicts and updates compiled; None for a model without compiled equations, or when the
     kernel does not reproduce ``dynamics`` on trial states (a filter the kernel was not written

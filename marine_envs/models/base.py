@@ -12,8 +12,8 @@ import copy
 import dataclasses
 import functools
 from abc import ABC, abstractmethod
-from collections.abc import Iterable, Mapping, Sequence
-from typing import Any, ClassVar
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -27,6 +27,24 @@ def require(condition: bool, name: str, value: Any, expectation: str) -> None:
     """Raise ``ValueError`` naming the offending parameter unless ``condition`` holds."""
     if not condition:
         raise ValueError(f"{name}={value!r} is invalid: {expectation}")
+
+
+class CompiledParameters(NamedTuple):
+    """How estimated parameters enter a model's compiled equations (what
+    :meth:`VehicleModel.compiled_parameters` declares; every function compiled).
+
+    :param prepare: ``prepare(theta, table, q)``: writes the packed constants of the parameter
+        values ``theta`` ``(p,)`` into ``q`` (which holds those of the table's values).
+    :param jacobian: ``jacobian(x, u, d, q, table, A)``: writes ``d f / d theta`` into the last
+        ``p`` columns of ``A`` ``(n, n + p)``, at constants ``q``.
+    :param constants: ``q`` at the table's parameter values.
+    :param table: what ``prepare`` and ``jacobian`` read: floats and integers.
+    """
+
+    prepare: Callable[..., None]
+    jacobian: Callable[..., None]
+    constants: FloatArray
+    table: tuple[FloatArray, NDArray[np.int64]]
 
 
 class VehicleModel(ABC):
@@ -223,6 +241,12 @@ class VehicleModel(ABC):
             step = max(1.0, abs(float(getattr(self.params, name))))
             columns.append((self._unit_step(name, step).rhs(x, u, d) - nominal) / step)
         return np.stack(columns, axis=-1)
+
+    def compiled_parameters(self, names: tuple[str, ...]) -> CompiledParameters | None:
+        """How the parameters ``names`` (as :meth:`rhs_with` means them) enter the model's
+        compiled equations, for an estimator that appends them to its state and runs compiled;
+        None (here) when the model declares no such form (the estimator then runs in numpy)."""
+        return None
 
     def check_parameter_names(self, names: Iterable[str]) -> tuple[str, ...]:
         """``names`` as a tuple, each a field of :attr:`params`.

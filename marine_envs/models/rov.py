@@ -75,7 +75,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..compiled import Equations, evaluate, jit, local_array, rows
-from .base import FloatArray, VehicleModel, require
+from .base import CompiledParameters, FloatArray, VehicleModel, require
 from .kinematics import body_to_ned, euler_rates, ned_to_body, skew
 from .rov_params import (
     HYDRO_COEFFICIENTS,
@@ -499,6 +499,16 @@ class ROVModel(VehicleModel):
         out = np.zeros((x.shape[0], 13, len(rows_of)))
         out[:, :6] = self._V @ scaled
         return out.reshape(*shape, 13, len(rows_of))
+
+    def compiled_parameters(self, names: tuple[str, ...]) -> CompiledParameters | None:
+        """Hydrodynamic coefficients (:data:`HYDRO_COEFFICIENTS`, at the current shape as
+        :meth:`rhs_with` means them): packed constants affine in them and their exact Jacobian
+        (:mod:`marine_envs.models.rov_coefficients`); None for any other name."""
+        if not set(names) <= set(HYDRO_COEFFICIENTS):
+            return None
+        from .rov_coefficients import coefficient_parameters  # (it imports this module)
+
+        return coefficient_parameters(self, tuple(names), rov_features, MORPHING)
 
     def _batch_with(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,
                     values: list[ArrayLike]):

@@ -1,5 +1,4 @@
-"""Batched extended Kalman filter with optional parameters appended to the state, and the
-Rauch-Tung-Striebel smoother.
+"""Batched extended Kalman filter with optional parameters appended to the state.
 
 Model (continuous dynamics, discrete measurements; filterpy's names)::
 
@@ -13,10 +12,11 @@ update is in Joseph form and symmetrised. The morphing-robot patent, the DP wave
 and the hovercraft EKF paper all identify parameters this way: hydrodynamic coefficients, wave
 frequencies and manoeuvring derivatives.
 
-A filter made by :meth:`ExtendedKalmanFilter.from_model` of a model with compiled equations runs
-predict and update compiled, filter by filter (:mod:`estimators.ekf_compiled`: the same filter;
-on the joint ROV benchmark 12x faster for one filter, 2.5x to 3x for batches of 64 to 1024); the
-numpy code here is its reference.
+A filter made by :meth:`~estimators.ekf.ExtendedKalmanFilter.from_model` of a model with
+compiled equations runs predict and update compiled, filter by filter
+(:mod:`estimators.ekf.kernels`: the same filter; on the joint ROV benchmark 12x faster for one
+filter, 2.5x to 3x for batches of 64 to 1024); the numpy code here serves dynamics given as
+Python callables and outputs that are not states.
 """
 
 from __future__ import annotations
@@ -31,10 +31,18 @@ from numpy.typing import ArrayLike, NDArray
 
 from marine_envs.models import VehicleModel
 from marine_envs.models.integrate import rk4
+from marine_envs.sensors import Saturation
 
-from .base import Estimator, as_batch, check_covariance, check_measurement
-from .ekf_compiled import CompiledDynamics, CompiledFilter, compiled_dynamics, rts_loop
-from .kalman import _wrap, _wrapped_channels, default_measurement_noise, default_process_noise
+from ..base import Estimator, as_batch, check_covariance, check_measurement
+from ..kalman import (
+    _wrap,
+    default_measurement_noise,
+    default_process_noise,
+    wrapped_channel_names,
+)
+from .dynamics import CompiledDynamics, compiled_dynamics
+from .kernels import CompiledFilter
+from .smoother import FilterResult, SmootherResult, rts_smooth
 
 FloatArray = NDArray[np.float64]
 #: ``f(x (R, n), u (R, n_u), theta (R, p)) -> x_dot (R, n)``. ``R`` is the batch size ``N`` or a
@@ -44,55 +52,12 @@ Dynamics = Callable[[FloatArray, FloatArray, FloatArray], FloatArray]
 Jacobian = Callable[[FloatArray, FloatArray, FloatArray], tuple[FloatArray, FloatArray]]
 
 
-@dataclasses.dataclass
-class FilterResult:
-    """An offline filter run over ``T`` steps of ``N`` filters (augmented state of size ``n``).
-
-    :param x, P: filtered estimates ``(T, N, n)`` and covariances ``(T, N, n, n)`` (after the
-        update with measurement ``k``).
-    :param x_pred, P_pred: predictions for step ``k`` (``x_pred[0]`` is the initial estimate).
-    :param transition: ``Phi_k`` ``(T - 1, N, n, n)`` from step ``k`` to ``k + 1``.
-    :param innovation: ``(T, N, m)``, 0 where a channel was missing.
-    :param nis, dof: normalised innovation squared ``(T, N)`` and its degrees of freedom.
-    :param state_names: names of the ``n`` states.
-    """
-
-    x: FloatArray
-    P: FloatArray
-    x_pred: FloatArray
-    P_pred: FloatArray
-    transition: FloatArray
-    innovation: FloatArray
-    nis: FloatArray
-    dof: NDArray[np.intp]
-    state_names: tuple[str, ...]
-
-    @property
-    def std(self) -> FloatArray:
-        """Standard deviation of each state, ``(T, N, n)``."""
-        return np.sqrt(np.maximum(np.diagonal(self.P, axis1=-2, axis2=-1), 0.0))
-
-
-@dataclasses.dataclass
-class SmootherResult:
-    """Rauch-Tung-Striebel smoothed estimates ``x`` ``(T, N, n)`` and covariances ``P``
-    ``(T, N, n, n)``, with the forward run they were computed from."""
-
-    x: FloatArray
-    P: FloatArray
-    filtered: FilterResult
-
-    @property
-    def std(self) -> FloatArray:
-        """Standard deviation of each state, ``(T, N, n)``."""
-        return np.sqrt(np.maximum(np.diagonal(self.P, axis1=-2, axis2=-1), 0.0))
-
-
 class ExtendedKalmanFilter(Estimator):
     """A batch of ``N`` extended Kalman filters sharing one model; parameters may be appended to
     the state.
 
-    :param f: continuous-time dynamics of the model states (see :data:`Dynamics`), vectorised.
+    :param f: continuous-time dynamics of the model states (see
+        :data:`~estimators.ekf.filter.Dynamics`), vectorised.
     :param h: the measurement: a matrix ``H`` ``(m, n)`` (``y = H x``) or a vectorised callable
         ``h(x (N, n)) -> (N, m)`` (linearised by central differences at each update).
     :param dt: nominal period of :meth:`predict`, s.
@@ -106,8 +71,8 @@ class ExtendedKalmanFilter(Estimator):
         unit per sqrt(s): a prediction over ``dt`` adds ``parameter_noise**2 * dt`` to its
         variance. It lets the estimate follow a parameter that changes (and keeps the filter from
         "saturating" on old data); 0 (default) = constant parameters.
-    :param jacobian: analytic Jacobians (see :data:`Jacobian`); default: central differences of
-        ``f`` over ``[x; theta]`` in one batched call.
+    :param jacobian: analytic Jacobians (see :data:`~estimators.ekf.filter.Jacobian`); default:
+        central differences of ``f`` over ``[x; theta]`` in one batched call.
     :param parameter_jacobian: ``df/dtheta (N, n, p) = parameter_jacobian(x, u, theta)`` alone
         (e.g. exact regressors of parameters that enter linearly); the differences then cover
         ``x`` only.
@@ -119,7 +84,11 @@ class ExtendedKalmanFilter(Estimator):
     :param divergence_ratio, reinitialise_diverged: as :class:`~estimators.kalman.KalmanFilter`.
     :param compiled: ``f`` as compiled dynamics without parameters (its ``f(z, u, d, q, out)``
         reading no disturbance ``d``): predict and update then run compiled
-        (:mod:`estimators.ekf_compiled`) when ``h`` is a matrix selecting states.
+        (:mod:`estimators.ekf.kernels`) when ``h`` is a matrix selecting states.
+    :param sensor_range: ``(low, high)`` ``(m,)`` each: the channels' full-scale range, in their
+        units. A reading at or beyond it is a saturated sensor's, which says only that the value
+        is beyond the range: it is taken as missing, not as a measurement (the filter would
+        otherwise pull its estimate, and states it cannot see, towards the clipped value).
     """
 
     def __init__(self, f: Dynamics, h: ArrayLike | Callable[[FloatArray], FloatArray], *,
@@ -131,7 +100,8 @@ class ExtendedKalmanFilter(Estimator):
                  P0: ArrayLike | None = None, angular: Sequence[str | int] = (),
                  substeps: int = 1, batch_size: int = 1, divergence_ratio: float = 10.0,
                  reinitialise_diverged: bool = False,
-                 compiled: CompiledDynamics | None = None) -> None:
+                 compiled: CompiledDynamics | None = None,
+                 sensor_range: tuple[ArrayLike, ArrayLike] | None = None) -> None:
         n, p, m = len(state_names), len(parameter_names), len(measurement_names)
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt={dt!r} is invalid: must be > 0 s")
@@ -171,6 +141,7 @@ class ExtendedKalmanFilter(Estimator):
                                  for a in angular], dtype=np.intp)
         self.divergence_ratio = float(divergence_ratio)
         self.reinitialise_diverged = reinitialise_diverged
+        self.sensor_range = _sensor_range(sensor_range, m)
         self._compiled: CompiledFilter | None = None  # set by from_model where it can
         selection = self._H is not None and p == 0 and bool(np.all(
             (self._H == 0) | (self._H == 1)) and np.all(self._H.sum(axis=1) == 1))
@@ -197,7 +168,7 @@ class ExtendedKalmanFilter(Estimator):
         and its parameters' values. Other arguments as the constructor.
 
         :param measured: the measured outputs, by name (``model.output_names``).
-        :param compiled: predict and update in compiled code (:mod:`estimators.ekf_compiled`)
+        :param compiled: predict and update in compiled code (:mod:`estimators.ekf.kernels`)
             where the model's equations are compiled, the parameters are none or the ROV's
             hydrodynamic coefficients, the measured outputs are states and no Jacobian is given
             (else, or False: the numpy path, the reference; :attr:`compiled` says which runs).
@@ -271,9 +242,8 @@ class ExtendedKalmanFilter(Estimator):
         sim = env.unwrapped.sim
         Q = default_process_noise(sim) if Q is None else Q
         R = default_measurement_noise(sim) if R is None else R
-        wrapped = [c for c, w in zip(sim.sensors.channels, _wrapped_channels(sim), strict=True)
-                   if w]
-        kwargs.setdefault("angular", wrapped)
+        kwargs.setdefault("angular", wrapped_channel_names(sim))
+        kwargs.setdefault("sensor_range", sensor_range(sim))
         kwargs.setdefault("substeps", getattr(sim.integrate, "substeps", 1))
         params = tuple(kwargs.get("parameters", ()))
         x_ref = np.concatenate([sim.task.x_ref, [getattr(sim.model.params, p) for p in params]])
@@ -368,6 +338,9 @@ class ExtendedKalmanFilter(Estimator):
 
     def update(self, y: ArrayLike, mask: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
         y, valid = check_measurement(y, mask, self.measurement_names, self.batch_size)
+        if self.sensor_range is not None:  # a saturated reading bounds the value, no more
+            low, high = self.sensor_range
+            valid = valid & (y > low) & (y < high)
         if self._compiled is not None:  # H selects states: y_hat = x[measured]
             e = self._innovation(y, self.x[:, self._compiled.measured], valid)
             self.x, self.P, S, nis, healthy = self._compiled.update(self.x, self.P, e, valid,
@@ -563,28 +536,6 @@ class ExtendedKalmanFilter(Estimator):
                 self.diverged = self.diverged | bad
 
 
-def rts_smooth(result: FilterResult) -> SmootherResult:
-    """Rauch-Tung-Striebel smoothing of a forward run: ``C_k = P_k Phi_k' P_pred_{k+1}^-1``,
-    ``x_s,k = x_k + C_k (x_s,k+1 - x_pred,k+1)``, ``P_s,k = P_k + C_k (P_s,k+1 - P_pred,k+1) C_k'``;
-    compiled (:func:`~estimators.ekf_compiled.rts_loop`) for a finite run, the numpy loop below
-    (the reference) otherwise.
-    """
-    arrays = (result.x, result.P, result.x_pred, result.P_pred, result.transition)
-    if all(np.isfinite(a).all() for a in arrays):  # (else numpy's NaNs, not numba's error)
-        x, P = np.empty_like(result.x), np.empty_like(result.P)
-        rts_loop(*(np.ascontiguousarray(a) for a in arrays), x, P)
-        return SmootherResult(x, P, result)
-    x, P = result.x.copy(), result.P.copy()
-    for k in range(x.shape[0] - 2, -1, -1):
-        # C' = P_pred^-1 Phi P (P and P_pred symmetric)
-        Ct = np.linalg.solve(result.P_pred[k + 1], result.transition[k] @ result.P[k])
-        C = Ct.transpose(0, 2, 1)
-        x[k] = result.x[k] + (C @ (x[k + 1] - result.x_pred[k + 1])[:, :, None])[:, :, 0]
-        Pk = result.P[k] + C @ (P[k + 1] - result.P_pred[k + 1]) @ Ct
-        P[k] = (Pk + Pk.transpose(0, 2, 1)) * 0.5
-    return SmootherResult(x, P, result)
-
-
 def _transition_rows(A: FloatArray) -> FloatArray:
     """The model rows ``[Phi_x, Gamma]`` ``(N, n, n + p)`` of ``exp([[A_x, A_theta], [0, 0]])``
     for ``A = [A_x, A_theta]`` ``(N, n, n + p)`` (one step's ``df/dz dt``).
@@ -611,5 +562,25 @@ def _transition_rows(A: FloatArray) -> FloatArray:
     return out
 
 
-__all__ = ["Dynamics", "ExtendedKalmanFilter", "FilterResult", "Jacobian", "SmootherResult",
-           "rts_smooth"]
+def _sensor_range(sensor_range: tuple[ArrayLike, ArrayLike] | None, m: int
+                  ) -> tuple[FloatArray, FloatArray] | None:
+    """``(low, high)`` as two ``(m,)`` arrays with ``low < high`` (None: no range)."""
+    if sensor_range is None:
+        return None
+    low, high = (np.broadcast_to(np.asarray(a, dtype=float), (m,)).copy() for a in sensor_range)
+    if np.isnan(low).any() or np.isnan(high).any() or not (low < high).all():
+        raise ValueError(f"sensor_range=({low.tolist()}, {high.tolist()}) is invalid: "
+                         f"{m} lows below {m} highs")
+    return low, high
+
+
+def sensor_range(sim: Any) -> tuple[FloatArray, FloatArray] | None:
+    """The full-scale range ``(low, high)`` of the environment's sensor channels (their
+    :class:`~marine_envs.sensors.Saturation` stages; None without one)."""
+    m = len(sim.sensors.channels)
+    low, high = np.full(m, -np.inf), np.full(m, np.inf)
+    for stage in sim.sensors.stages:
+        if isinstance(stage, Saturation):
+            low = np.maximum(low, np.ravel(stage.low))
+            high = np.minimum(high, np.ravel(stage.high))
+    return (low, high) if np.isfinite(low).any() or np.isfinite(high).any() else None

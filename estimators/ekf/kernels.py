@@ -6,7 +6,7 @@ that path spends on structure it does not see:
 
 * the state Jacobian by the same central differences, of the model's compiled equations one
   filter at a time (no batch of ``2 n N`` points through numpy);
-* the parameters' Jacobian exact (:func:`coefficient_dynamics`);
+* the parameters' Jacobian as the model declares it (:mod:`estimators.ekf.dynamics`);
 * the model rows ``[Phi_x, Gamma]`` of the transition from a degree-16 Taylor polynomial
   evaluated by Paterson-Stockmeyer (6 products of ``n x n`` matrices and one of ``n x (n + p)``
   instead of 7 of ``n x (n + p)``), scaled by a sharper norm: on the EKF benchmark's record no
@@ -19,12 +19,11 @@ that path spends on structure it does not see:
 
 The dynamics a kernel integrates and differences are the model's own compiled equations
 ``core(x, u, d, q, out)``; estimated parameters enter through the packed constants ``q``, which
-the kernel sets for each filter (:class:`CompiledDynamics`).
+the kernel sets for each filter (:class:`~estimators.ekf.dynamics.CompiledDynamics`).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from collections.abc import Callable, Sequence
@@ -32,9 +31,9 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from marine_envs.compiled import compile_for, jit, local_array
-from marine_envs.models import VehicleModel
-from marine_envs.models.rov import HYDRO_COEFFICIENTS, MORPHING, ROVModel, rov_features
+from marine_envs.compiled import compile_for, jit
+
+from .dynamics import CompiledDynamics
 
 FloatArray = NDArray[np.float64]
 #: Degree of the Taylor polynomial of the transition, and the largest ``alpha`` (see
@@ -49,215 +48,13 @@ _G = tuple(1.0 / math.factorial(k + 1) for k in range(ORDER))
 #: The update's short form ``P - W W'`` is used while every variance stays at least this share
 #: of its prior: its rounding, ``~eps`` of the prior, is then below ``1e-12`` of the result.
 SHORT_FORM = 1e-4
-#: Input step of the differences of a model's equations in its inputs (affine there: exact
-#: for any step; a large one keeps the rounding of the equations' value out), input units.
-INPUT_STEP = 1e3
-
-
-@dataclasses.dataclass(frozen=True)
-class CompiledDynamics:
-    """What the kernels of a filter need to know about its dynamics (all functions compiled).
-
-    :param f: ``f(x, u, d, q, out)``: the model states' derivative, a model's compiled
-        equations with ``q`` its packed constants.
-    :param integrate: :func:`marine_envs.compiled.rk4` of ``f``.
-    :param prepare: ``prepare(theta, table, q)``: writes the constants of the parameter values
-        ``theta`` into ``q`` (which holds those of the values the table was made at).
-    :param parameter_jacobian: ``jac(x, u, d, q, table, A)``: writes ``d f / d theta`` into the
-        last ``p`` columns of ``A`` ``(n, n + p)``.
-    :param constants: ``q`` at the table's parameter values.
-    :param table: what ``prepare`` and ``parameter_jacobian`` read: floats and integers.
-    :param n, p: number of model states and of estimated parameters.
-    """
-
-    f: Callable[..., None]
-    integrate: Callable[..., None]
-    prepare: Callable[..., None]
-    parameter_jacobian: Callable[..., None]
-    constants: FloatArray
-    table: tuple[FloatArray, NDArray[np.int64]]
-    n: int
-    p: int
-
-
-def compiled_dynamics(model: VehicleModel, parameters: Sequence[str]) -> CompiledDynamics | None:
-    """The compiled dynamics of ``model`` with ``parameters`` estimated, or None when there are
-    none: the model has no compiled equations, or parameters other than the ROV's hydrodynamic
-    coefficients are asked for."""
-    equations = type(model).equations
-    if equations is None or type(model).rhs is not VehicleModel.rhs:
-        return None
-    constants = np.asarray(model.constants, dtype=float)
-    if constants.ndim != 1:  # parameters held per batch row
-        return None
-    n = len(model.state_names)
-    if not parameters:
-        return CompiledDynamics(equations.core, equations.rk4, same_constants,
-                                no_parameters, constants.copy(),
-                                (np.zeros(0), np.zeros(0, dtype=np.int64)), n, 0)
-    if type(model) is ROVModel and set(parameters) <= set(HYDRO_COEFFICIENTS):
-        return coefficient_dynamics(model, tuple(parameters))
-    return None
-
-
-@jit
-def same_constants(theta, table, q):
-    """Constants that do not depend on the parameters: left as they are."""
-
-
-@jit
-def no_parameters(x, u, d, q, table, A):
-    """The parameter Jacobian of dynamics without parameters: nothing."""
-
-
-# -- the ROV's hydrodynamic coefficients ---------------------------------------------------------
-def coefficient_dynamics(model: ROVModel, names: tuple[str, ...]) -> CompiledDynamics | None:
-    """The ROV's equations with hydrodynamic coefficients ``names`` estimated, as
-    :meth:`ROVModel.rhs_with` defines them: a coefficient's value is its value at the current
-    shape, i.e. the model in which it is the same in cruise and work shape.
-
-    The packed constants of such a model are affine in the coefficients (the forces are linear
-    in them, the mass matrix does not hold them), so each filter's are ``q_0 + D (theta -
-    theta_0)``, with ``D`` sparse, from the model's own packing of a variant per coefficient.
-    The parameter Jacobian is the exact ``[M(s)^-1 Phi; 0]``: ``Phi`` is one feature per
-    coefficient in one force row, and the equations are affine in the forces, so one difference
-    per force is ``M(s)^-1`` to rounding.
-
-    :return: None when a coefficient's regressor is not one feature, or a variant is refused.
-    """
-    made = _coefficient_tables(type(model), model.params, names)
-    if made is None:
-        return None
-    constants, table = made
-    equations = type(model).equations
-    n, n_u = len(model.state_names), len(model.input_names)
-    n_features = model.features(model.x0).shape[-1]
-    return CompiledDynamics(equations.core, equations.rk4, _affine_constants,
-                            _coefficient_jacobian(equations.core, n, n_u, n_features), constants,
-                            table, n, len(names))
-
-
-@functools.lru_cache(maxsize=16)
-def _coefficient_tables(kind: type[ROVModel], params: object, names: tuple[str, ...]
-                        ) -> tuple[FloatArray, tuple[FloatArray, NDArray[np.int64]]] | None:
-    """``(q_0, table)`` of :func:`coefficient_dynamics` for the model ``kind(params)``.
-
-    The table: floats ``[theta_0 (p) | q_0 of the changing constants (K) | D's entries]``,
-    integers ``[K | feature (p) | force (p) | changing constants (K) | their first entry
-    (K + 1) | each entry's coefficient]``."""
-    model = kind(params)
-    layout = _coefficient_layout(model, names)
-    theta0 = np.array([getattr(model.params, k) for k in names], dtype=float)
-    base = _shape_free(model, names, theta0)
-    if layout is None or base is None:
-        return None
-    q0 = np.asarray(base.constants, dtype=float)
-    columns = []
-    for j in range(len(names)):
-        step = -max(1.0, abs(theta0[j]))  # more dissipative: a variant the model accepts
-        moved = _shape_free(model, names, theta0 + step * np.eye(len(names))[j])
-        if moved is None:
-            return None
-        columns.append((np.asarray(moved.constants) - q0) / step)
-    D = np.column_stack(columns)
-    changing = np.flatnonzero((D != 0).any(axis=1))
-    entries = [np.flatnonzero(D[i]) for i in changing]
-    starts = np.cumsum([0] + [e.size for e in entries])
-    coefficient = np.concatenate(entries)
-    values = np.concatenate([D[i, e] for i, e in zip(changing, entries, strict=True)])
-    floats = np.concatenate([theta0, q0[changing], values])
-    ints = np.concatenate([[changing.size], *layout, changing, starts, coefficient])
-    return q0, (floats, ints.astype(np.int64))
-
-
-def _shape_free(model: ROVModel, names: tuple[str, ...], values: FloatArray) -> ROVModel | None:
-    """``model`` with coefficients ``names`` at ``values`` in cruise and work shape; None when
-    the model refuses them."""
-    changes = {}
-    for name, value in zip(names, values.tolist(), strict=True):
-        changes[name] = value
-        if name in MORPHING:
-            changes[f"work_{name}"] = value
-    try:
-        return model.with_params(**changes)
-    except ValueError:
-        return None
-
-
-def _coefficient_layout(model: ROVModel, names: tuple[str, ...]
-                        ) -> tuple[NDArray[np.int64], NDArray[np.int64]] | None:
-    """The feature (row of :meth:`ROVModel.features`) and the force each coefficient's regressor
-    is (:meth:`ROVModel.hydrodynamic_regressors`), found on random states with a current; None
-    unless each is exactly one feature in one force."""
-    rng = np.random.default_rng(0)
-    x = rng.normal(0.0, 0.5, (4, len(model.state_names)))
-    d = np.column_stack([rng.normal(0.0, 0.3, (4, 3)), rng.uniform(0.0, 1.0, 4)])
-    features = model.features(x, d)  # (4, F)
-    regressors = model.hydrodynamic_regressors(x, names, d)  # (4, n_u, p)
-    rows, cols = [], []
-    for j in range(len(names)):
-        forces = np.flatnonzero(np.abs(regressors[:, :, j]).max(axis=0))
-        if forces.size != 1:
-            return None
-        match = np.flatnonzero((features == regressors[:, forces[0], j, None]).all(axis=0))
-        if match.size != 1:
-            return None
-        rows.append(match[0])
-        cols.append(forces[0])
-    return np.array(rows, dtype=np.int64), np.array(cols, dtype=np.int64)
-
-
-@jit
-def _affine_constants(theta, table, q):
-    """``q = q_0 + D (theta - theta_0)`` on the constants that change (``table``: see
-    :func:`_coefficient_tables`)."""
-    floats, ints = table
-    p, changing = theta.size, ints[0]
-    index_at, start_at = 1 + 2 * p, 1 + 2 * p + changing
-    coefficient_at, value_at = start_at + changing + 1, p + changing
-    for e in range(changing):
-        value = floats[p + e]
-        for t in range(ints[start_at + e], ints[start_at + e + 1]):
-            j = ints[coefficient_at + t]
-            value += (theta[j] - floats[j]) * floats[value_at + t]
-        q[ints[index_at + e]] = value
-
-
-@functools.cache
-def _coefficient_jacobian(core: Callable[..., None], n: int, n_u: int, n_features: int
-                          ) -> Callable[..., None]:
-    """The parameter Jacobian of :func:`coefficient_dynamics` for equations ``core`` of ``n``
-    states, ``n_u`` inputs and ``n_features`` features."""
-    n_values = n * (n_u + 1)  # f, then with each force moved
-
-    @jit
-    def jacobian(x, u, d, q, table, A):
-        ints = table[1]
-        p = A.shape[1] - n
-        F, v, values = local_array(n_features), local_array(n_u), local_array(n_values)
-        rov_features(x, u, d, F)
-        for k in range(n_u):
-            v[k] = u[k]
-        for k in range(n_u + 1):  # one call site: the equations are merged in once
-            if k > 0:
-                v[k - 1] = u[k - 1] + INPUT_STEP
-            core(x, v, d, q, values[k * n:(k + 1) * n])
-            if k > 0:
-                v[k - 1] = u[k - 1]
-        for j in range(p):  # d f / d u = [M(s)^-1; 0], exact: f is affine in u
-            feature, force = F[ints[1 + j]], ints[1 + p + j] + 1
-            for i in range(n):
-                A[i, n + j] = (values[force * n + i] - values[i]) / INPUT_STEP * feature
-
-    return jacobian
-
 
 # -- the kernels ---------------------------------------------------------------------------------
 class CompiledFilter:
     """The compiled path of an :class:`~estimators.ekf.ExtendedKalmanFilter` whose measurement
     is a selection of its model states.
 
-    :param dynamics: the filter's dynamics (:func:`compiled_dynamics`).
+    :param dynamics: the filter's dynamics (:func:`~estimators.ekf.dynamics.compiled_dynamics`).
     :param measured: the state measured by each channel ``(m,)``.
     :param n_d: number of disturbance channels.
     """
@@ -335,8 +132,8 @@ def predict_kernel(f: Callable[..., None], integrate: Callable[..., None],
                    prepare: Callable[..., None], parameter_jacobian: Callable[..., None], n: int,
                    p: int) -> Callable[..., None]:
     """The compiled prediction of every filter of a batch for the dynamics of
-    :class:`CompiledDynamics` with ``n`` states and ``p`` parameters (arguments:
-    :meth:`CompiledFilter.predict`)."""
+    :class:`~estimators.ekf.dynamics.CompiledDynamics` with ``n`` states and ``p`` parameters
+    (arguments: :meth:`CompiledFilter.predict`)."""
     size = n + p
 
     @jit
@@ -651,20 +448,3 @@ def _finite(v):
         if not np.isfinite(v[i]):
             return False
     return True
-
-
-@jit
-def rts_loop(x, P, x_pred, P_pred, transition, x_out, P_out):
-    """The Rauch-Tung-Striebel recursion of :func:`estimators.ekf.rts_smooth` over a finite
-    forward run of ``N`` filters (``x`` ``(T, N, n)``, ``P`` ``(T, N, n, n)``, ...), written to
-    ``x_out`` and ``P_out``: the same solve and products, without a Python step per sample."""
-    T, N, n = x.shape
-    x_out[T - 1] = x[T - 1]
-    P_out[T - 1] = P[T - 1]
-    for k in range(T - 2, -1, -1):
-        for b in range(N):
-            Ct = np.linalg.solve(P_pred[k + 1, b], np.dot(transition[k, b], P[k, b]))
-            C = np.ascontiguousarray(Ct.T)
-            x_out[k, b] = x[k, b] + np.dot(C, x_out[k + 1, b] - x_pred[k + 1, b])
-            Pk = P[k, b] + np.dot(np.dot(C, P_out[k + 1, b] - P_pred[k + 1, b]), Ct)
-            P_out[k, b] = (Pk + Pk.T) * 0.5
