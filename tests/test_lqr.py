@@ -171,7 +171,7 @@ class TrueStateEstimate(gym.Wrapper):
 
     def __init__(self, env, names=None):
         super().__init__(env)
-        model_names = env.unwrapped.sim.model.state_names
+        model_names = env.unwrapped.system.model.state_names
         self.estimator = SimpleNamespace(state_names=names or (*model_names, "bias"))
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (len(model_names) + 1,))
 
@@ -211,11 +211,11 @@ def test_auto_without_an_estimator_uses_the_sensors_or_says_an_estimator_is_need
 
 def test_continuous_flag_applies_the_continuous_gain_at_the_env_period():
     env = gym.make("marine_envs/Hydrofoil-v0")
-    sim = env.unwrapped.sim
-    A, B, _ = sim.model.linearize(sim.task.x_ref, sim.task.u_ref)
+    system = env.unwrapped.system
+    A, B, _ = system.model.linearize(system.task.x_ref, system.task.u_ref)
     continuous = LQRPolicy.for_env(env, observed="state", continuous=True)
-    np.testing.assert_allclose(continuous.K, lqr_gain(A, B, np.diag(sim.task.q),
-                                                      np.diag(sim.task.r)), rtol=1e-9)
+    np.testing.assert_allclose(continuous.K, lqr_gain(A, B, np.diag(system.task.q),
+                                                      np.diag(system.task.r)), rtol=1e-9)
     discrete = LQRPolicy.for_env(env, observed="state")
     assert np.abs(discrete.K - continuous.K).max() > 0.01 * np.abs(continuous.K).max()
 
