@@ -95,7 +95,6 @@ class LQRPolicy:
         if not np.all(low < high):
             raise ValueError(f"u_low={low.tolist()} and u_high={high.tolist()} are invalid: "
                              "each low < high")
-        self.u_mid, self.u_half = (high + low) / 2, (high - low) / 2
         self.observation_size = idx.size if observation_size is None else int(observation_size)
         if self.observation_size < idx.size:
             raise ValueError(f"observation_size={observation_size} is smaller than the "

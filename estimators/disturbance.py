@@ -15,7 +15,7 @@ appended to the vehicle's:
   the AR(2) ``xi_{k+1} = phi_1 xi_k + phi_2 xi_{k-1} + w_k`` whose autocovariance at lags 0, 1, 2
   is the sea's own (Yule-Walker on a long realisation of the env's own sea, so a sea whose
   height varies in time is averaged over its schedule): its peak frequency and damping are
-  :attr:`DisturbanceModel.wave_peaks`;
+  :attr:`~marine_envs.sea.shaping.DisturbanceModel.wave_peaks`;
 * a step event (the ROV's morph command; :class:`~marine_envs.sea.processes.StepEvent`) a random
   walk whose increments carry the jump's energy over its window.
 
@@ -73,9 +73,9 @@ MODEL_ERROR_MARGIN = 10.0
 
 
 def disturbance_model(system: Any) -> DisturbanceModel:
-    """The :class:`DisturbanceModel` of a system's disturbance source, which describes its own
-    linear model (``linear_model(dt)``, module docstring); a source without one is taken as
-    white noise of its sampled covariance.
+    """The :class:`~marine_envs.sea.shaping.DisturbanceModel` of a system's disturbance
+    source, which describes its own linear model (``linear_model(dt)``, module docstring); a
+    source without one is taken as white noise of its sampled covariance.
 
     :param system: an environment's :class:`~marine_envs.envs.system.System`.
     """

@@ -10,6 +10,7 @@ import marine_envs  # noqa: F401
 from agents.evaluation import run_episode
 from agents.excitation import RandomSteps, Sine, Zero
 from agents.lqr import LQRPolicy, lqr, lqr_gain, lqr_integral, zoh
+from marine_envs.envs.system import Actuation
 from marine_envs.models import get_model
 
 
@@ -54,12 +55,13 @@ def test_integral_action_removes_the_heading_offset_of_a_constant_yaw_moment():
     plain = LQRPolicy.for_model(model, Q, R, dt=dt)
     integral = LQRPolicy.for_model(model, Q, R, dt=dt, integral={"psi": 50.0})
     d = np.array([0.003, 0.0])  # rad/s^2: a steady yaw moment (wind, current)
+    actuation = Actuation.direct(model)
     final = {}
     for name, policy in (("plain", plain), ("integral", integral)):
         x = np.zeros(5)
         for _ in range(3000):  # 300 s
             action, _ = policy.predict(x)
-            u = policy.u_mid + policy.u_half * action
+            u = actuation.to_input(action)
             x = Ad @ x + BEd @ np.concatenate([u, d])
         final[name] = x
     assert abs(final["plain"][2]) > 0.02  # rad: plain LQR leaves a heading offset (2.6 deg)

@@ -31,7 +31,8 @@ def make_task(model: VehicleModel, weights: Mapping[str, float], input_weights: 
               *, reference: Mapping[str, float] | None = None,
               limits: Mapping[str, float | tuple[float, float]] | None = None,
               reward_scale: float = 1.0) -> Task:
-    """A :class:`Task` from weights, reference and limits given by state and input name.
+    """A :class:`~marine_envs.envs.system.Task` from weights, reference and limits given by
+    state and input name.
 
     :param reference: offsets from the model's nominal state ``x0``, by state name.
     :param limits: per state, ``a`` for ``|x| <= a`` or ``(low, high)``; the episode ends outside.

@@ -1,4 +1,4 @@
-"""The public face of a simulated vehicle, :class:`System`; the one action map: :class:`Actuation`.
+"""The public face of a simulated vehicle, ``System``, and the one action map, ``Actuation``.
 
 An environment is a :class:`System` (what is simulated: model, control period, actuators, task,
 sensors, disturbances, initial states, effects) plus the batch state of its boats.
