@@ -45,8 +45,8 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     if seconds is not None and not (math.isfinite(seconds) and seconds > 0):
         raise ValueError(f"seconds={seconds!r} is invalid: a positive episode length in s")
     env = gym.make(env_id, **dict(env_kwargs or {}))
-    sim = env.unwrapped.sim
-    steps = env.spec.max_episode_steps if seconds is None else max(1, round(seconds / sim.dt))
+    system = env.unwrapped.system
+    steps = env.spec.max_episode_steps if seconds is None else max(1, round(seconds / system.dt))
     env = gym.wrappers.TimeLimit(env.unwrapped, steps)  # the requested length, not the spec's
     if estimator is not None:
         from estimators import EstimatorWrapper
@@ -55,32 +55,32 @@ def run(env_id: str, policy: str = "lqr-state", seconds: float | None = None, se
     episode = run_episode(env, make_policy(policy, env, seed), steps, seed=seed)
     if plot is not None:
         title = f"{env_id}, policy {policy}" + (f" on {estimator}" if estimator else "")
-        plot_episode(episode, sim, f"{title}, seed {seed}", Path(plot),
+        plot_episode(episode, system, f"{title}, seed {seed}", Path(plot),
                      estimated=estimator is not None)
-    return summarise(episode, sim, estimated=estimator is not None)
+    return summarise(episode, system, estimated=estimator is not None)
 
 
-def summarise(episode: Episode, sim: Any, estimated: bool = False) -> dict[str, float]:
+def summarise(episode: Episode, system: Any, estimated: bool = False) -> dict[str, float]:
     """The episode's return and :func:`~agents.evaluation.episode_metrics` (its estimation
     errors too when the observations are estimates of the state)."""
     return {"return": episode.episode_return, **episode_metrics(
-        sim, episode.states, episode.inputs, episode.clipped, episode.terminated,
+        system, episode.states, episode.inputs, episode.clipped, episode.terminated,
         episode.observations if estimated else None)}
 
 
-def _measuring_channel(sim: Any, state: int) -> int | None:
+def _measuring_channel(system: Any, state: int) -> int | None:
     """The sensor channel whose output moves with state ``state`` (itself, or e.g. the DP
     vessel's measured ``north`` = LF + WF motion for ``north_lf``), or None."""
-    model = sim.model
+    model = system.model
     x = model.x0[None].repeat(2, axis=0)
     x[1, state] += 1.0
     y = model.output(x)
-    channels = [model.output_names.index(c) for c in sim.sensors.channels]
+    channels = [model.output_names.index(c) for c in system.channels]
     moved = np.flatnonzero(y[1, channels] != y[0, channels])
     return int(moved[0]) if moved.size else None
 
 
-def plot_episode(episode: Episode, sim: Any, title: str, path: Path,
+def plot_episode(episode: Episode, system: Any, title: str, path: Path,
                  estimated: bool = False) -> None:
     """True and measured (or, with ``estimated``, estimated) values of the weighted states,
     and the inputs, against time."""
@@ -89,20 +89,20 @@ def plot_episode(episode: Episode, sim: Any, title: str, path: Path,
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    model = sim.model
-    shown = [i for i in np.flatnonzero(sim.task.q > 0)][:4]
+    model = system.model
+    shown = [i for i in np.flatnonzero(system.task.q > 0)][:4]
     fig, axes = plt.subplots(len(shown) + 1, 1, figsize=(9, 1.8 * (len(shown) + 1) + 0.6),
                              sharex=True)
     for ax, i in zip(axes, shown, strict=False):
         name, unit = model.state_names[i], model.state_units[i]
         scale = 180 / math.pi if unit.startswith("rad") else 1.0
-        channel = i if estimated else _measuring_channel(sim, i)
+        channel = i if estimated else _measuring_channel(system, i)
         if channel is not None:
             seen = episode.observations[:, channel]
             ax.plot(episode.time, seen * scale, color="tab:orange", lw=0.6, alpha=0.7,
                     label="estimated" if estimated else "measured")
         ax.plot(episode.time, episode.states[:, i] * scale, color="tab:blue", label="true")
-        ax.axhline(sim.task.x_ref[i] * scale, color="0.5", lw=0.8, ls="--", label="reference")
+        ax.axhline(system.task.x_ref[i] * scale, color="0.5", lw=0.8, ls="--", label="reference")
         ax.set_ylabel(f"{name}\n({unit.replace('rad', 'deg')})")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8, ncol=3, loc="upper right")

@@ -161,9 +161,10 @@ def _rms(a: FloatArray) -> FloatArray:
     return np.sqrt(np.mean(a * a, axis=0))
 
 
-def episode_metrics(sim: Any, states: FloatArray, inputs: FloatArray, clipped: NDArray[np.bool_],
+def episode_metrics(system: Any, states: FloatArray, inputs: FloatArray, clipped: NDArray[np.bool_],
                     terminated: bool, estimates: FloatArray | None = None) -> dict[str, float]:
-    """What one episode scored on ``sim``'s task.
+    """What one episode scored on the task of ``system`` (an environment's
+    :class:`~marine_envs.envs.system.System`).
 
     :param states: true states ``(K, n_x)`` at the steps' starts; ``inputs`` ``(K, n_u)`` the
         physical inputs applied over them; ``clipped`` ``(K,)`` whether an action was clipped.
@@ -176,10 +177,10 @@ def episode_metrics(sim: Any, states: FloatArray, inputs: FloatArray, clipped: N
         with ``estimates``, ``estimation_rms_<state>`` of every model state. Angles and rates
         in degrees (``_deg`` names), the rest SI.
     """
-    task, model = sim.task, sim.model
+    task, model = system.task, system.model
     dx, du = states - task.x_ref, inputs - task.u_ref
     cost = float(np.sum(dx * dx * task.q) + np.sum(du * du * task.r))
-    out = {"cost": cost, "failed": float(terminated), "seconds": len(states) * sim.dt}
+    out = {"cost": cost, "failed": float(terminated), "seconds": len(states) * system.dt}
     for i, rms in zip(np.flatnonzero(task.q > 0), _rms(dx[:, task.q > 0]), strict=True):
         name, value = _in_user_units(model.state_names[i], model.state_units[i], float(rms))
         out[f"rms_{name}"] = value
@@ -262,13 +263,13 @@ def evaluate(env_id: str, policy: str | Callable[[Any], Any], estimator: str = R
     actor = make_policy(policy, venv, estimator=estimator) if isinstance(policy, str) \
         else policy(venv)
     result = rollout(venv, actor, steps, seeds[0], progress)
-    sim = venv.unwrapped.sim
+    system = venv.unwrapped.system
     estimated = estimator not in (ORACLE, RAW)
     venv.close()
     rows = []
     for i, seed in enumerate(seeds):
         ep = result.episode(i)
         rows.append({"seed": seed, **episode_metrics(
-            sim, ep["states"], ep["inputs"], ep["clipped"], ep["terminated"],
+            system, ep["states"], ep["inputs"], ep["clipped"], ep["terminated"],
             ep["observations"] if estimated else None)})
     return rows

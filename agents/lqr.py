@@ -29,6 +29,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from marine_envs.envs.system import System, folded_action_map
 from marine_envs.models.linear import (
     LQRSolution,
     check_matrix,
@@ -94,7 +95,6 @@ class LQRPolicy:
         if not np.all(low < high):
             raise ValueError(f"u_low={low.tolist()} and u_high={high.tolist()} are invalid: "
                              "each low < high")
-        self.u_mid, self.u_half = (high + low) / 2, (high - low) / 2
         self.observation_size = idx.size if observation_size is None else int(observation_size)
         if self.observation_size < idx.size:
             raise ValueError(f"observation_size={observation_size} is smaller than the "
@@ -102,9 +102,8 @@ class LQRPolicy:
         self.x_ref = self.x_ref_full[idx]
 
         # the whole affine map to normalised actions, precomputed: v = c - e G' - z H'
-        to_action = np.eye(n_u) if self.allocation is None else self.allocation
-        to_action = to_action / self.u_half[:, None]
-        self._c = (to_action @ self.u_ref - self.u_mid / self.u_half)
+        to_action, offset = folded_action_map(low, high, self.allocation)
+        self._c = to_action @ self.u_ref + offset
         self.K_observed = self.K[:, idx]
         self._G = to_action @ self.K_observed
 
@@ -249,9 +248,8 @@ class LQRPolicy:
         :raises ValueError: unknown ``observed``; sensors that are not states (use an
             estimator); an estimator whose states are not the model's.
         """
-        sim = env.unwrapped.sim
-        model = sim.model
-        names = tuple(model.state_names)
+        system = env.unwrapped.system
+        names = tuple(system.model.state_names)
         space = getattr(env, "single_observation_space", None)
         space = env.observation_space if space is None else space
         width = int(np.prod(space.shape)) if space.shape else None
@@ -269,14 +267,14 @@ class LQRPolicy:
                                      f"with the model's {list(names)}: LQR cannot read the "
                                      "estimate")
                 if feedforward and not integral and not continuous:
-                    policy = _with_disturbances(sim, estimator)
+                    policy = _with_disturbances(system, estimator)
                     if policy is not None:
                         return policy
                 observed, size = "state", width
             else:
                 observed = "sensors"
         if observed == "sensors":
-            channels = tuple(sim.sensors.channels)
+            channels = system.channels
             missing = [c for c in channels if c not in names]
             if missing:
                 raise ValueError(f"LQR on the sensors needs measured states; {missing} are not "
@@ -284,13 +282,27 @@ class LQRPolicy:
                                  "(EstimatorWrapper, observed='auto') or feed the full state "
                                  "(observed='state')")
             idx = [names.index(c) for c in channels]
-        act = sim.actuation
-        allocation = None if act.matrix is None else np.linalg.pinv(act.matrix)
-        return cls.for_model(model, np.diag(sim.task.q), np.diag(sim.task.r), dt=sim.dt,
-                             continuous=continuous, x_ref=sim.task.x_ref, u_ref=sim.task.u_ref,
-                             u_low=act.low, u_high=act.high, allocation=allocation,
-                             integral=integral, observed=idx, observation_size=size,
-                             anti_windup=anti_windup)
+        return cls.for_system(system, idx, integral=integral, continuous=continuous,
+                              anti_windup=anti_windup, observation_size=size)
+
+    @classmethod
+    def for_system(cls, system: System, observed: Sequence[str | int] | None = None, *,
+                   integral: Mapping[str, float] | None = None, continuous: bool = False,
+                   anti_windup: bool = True, observation_size: int | None = None) -> LQRPolicy:
+        """The LQR of a system's model (``env.unwrapped.system``), linearised at its task's
+        reference, with the task's weights, control period and actuators (thrusters through
+        the least-squares allocation).
+
+        :param observed: names (or indices) of the states the observation holds; None = all.
+
+        Other parameters as :meth:`for_model`.
+        """
+        task, act = system.task, system.actuation
+        return cls.for_model(system.model, np.diag(task.q), np.diag(task.r), dt=system.dt,
+                             continuous=continuous, x_ref=task.x_ref, u_ref=task.u_ref,
+                             u_low=act.low, u_high=act.high, allocation=act.to_actuators,
+                             integral=integral, observed=observed,
+                             observation_size=observation_size, anti_windup=anti_windup)
 
     # -- SB3's interface -------------------------------------------------------------------------
     def predict(self, observation: ArrayLike, state: Any = None, episode_start: Any = None,
@@ -413,23 +425,22 @@ def _integral_spec(integral: Mapping[str, float] | None,
     return np.array([names.index(k) for k in chosen], dtype=np.intp), weights
 
 
-def _with_disturbances(sim: Any, estimator: Any) -> LQRPolicy | None:
+def _with_disturbances(system: System, estimator: Any) -> LQRPolicy | None:
     """:meth:`LQRPolicy.for_augmented` on a Kalman filter's model of the vehicle and its
     disturbance states; None when the estimator is no such filter (or no design exists)."""
     from estimators.kalman import KalmanFilter
 
-    n_x = len(sim.model.state_names)
+    n_x = len(system.model.state_names)
     if not isinstance(estimator, KalmanFilter) or len(estimator.state_names) == n_x:
         return None
     n = len(estimator.state_names)
-    act = sim.actuation
+    task, act = system.task, system.actuation
     try:
         return LQRPolicy.for_augmented(
             estimator.F.astype(float), estimator.G.astype(float),
-            np.concatenate([sim.task.q, np.zeros(n - n_x)]), sim.task.r,
-            x_ref=np.concatenate([sim.task.x_ref, np.zeros(n - n_x)]), u_ref=sim.task.u_ref,
-            u_low=act.low, u_high=act.high,
-            allocation=None if act.matrix is None else np.linalg.pinv(act.matrix), dt=sim.dt)
+            np.concatenate([task.q, np.zeros(n - n_x)]), task.r,
+            x_ref=np.concatenate([task.x_ref, np.zeros(n - n_x)]), u_ref=task.u_ref,
+            u_low=act.low, u_high=act.high, allocation=act.to_actuators, dt=system.dt)
     except ValueError:
         return None
 

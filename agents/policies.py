@@ -115,7 +115,8 @@ def make_policy(name: str, env: Any, seed: int | None = None, estimator: str | N
     if name in ("random", "prbs"):
         options = {**options, "seed": seed}
     signal = SIGNALS[name](env.action_space.shape[0], env.unwrapped.dt, **options)
-    signal.centre = env.unwrapped.sim.nominal_action()
+    system = env.unwrapped.system
+    signal.centre = system.actuation.nominal_action(system.model)
     return signal
 
 
@@ -143,7 +144,9 @@ class NominalInput:
 
     def __init__(self, env: Any) -> None:
         # clipped as an excitation's actions are (the nominal action lies inside the range)
-        self.action = np.clip(env.unwrapped.sim.nominal_action(), -1.0, 1.0).astype(np.float32)
+        system = env.unwrapped.system
+        nominal = system.actuation.nominal_action(system.model)
+        self.action = np.clip(nominal, -1.0, 1.0).astype(np.float32)
 
     def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, None]:
@@ -156,8 +159,8 @@ class OnTrueState:
     baseline, the best an estimator could give the controller (a single environment)."""
 
     def __init__(self, env: Any, policy: Any) -> None:
-        self.sim, self.policy = env.unwrapped.sim, policy
+        self.env, self.policy = env.unwrapped, policy
 
     def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
                 deterministic: bool = True) -> tuple[np.ndarray, Any]:
-        return self.policy.predict(self.sim.x[0], state, episode_start, deterministic)
+        return self.policy.predict(self.env.true_state, state, episode_start, deterministic)

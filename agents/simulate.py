@@ -66,13 +66,13 @@ class _Run:
         if policy not in POLICIES:
             raise ValueError(f"unknown policy {policy!r}; choose from {', '.join(POLICIES)}")
         self.env = gym.make(env_id, max_episode_steps=steps, **dict(env_kwargs or {}))
-        sim = self.sim = self.env.unwrapped.sim
-        names = sim.model.disturbance_names
+        system = self.system = self.env.unwrapped.system
+        names = system.model.disturbance_names
         unknown = sorted(set(disturbances) - set(names))
         if unknown:
             raise ValueError(f"unknown disturbance(s) {unknown} of {env_id}: choose from "
                              f"{', '.join(names) or 'none'}")
-        inputs = sim.model.input_names
+        inputs = system.model.input_names
         self.actuators = _actuators(actuator_sensors, inputs, env_id)
         self._noise = _actuator_noise(actuator_noise, self.actuators)
         self._applied = [inputs.index(name) for name in self.actuators]
@@ -82,10 +82,10 @@ class _Run:
         self.steps, self.seed = steps, seed
         self._recorded = [names.index(name) for name in disturbances]
         self.columns = ["time", *inputs, *(name + APPLIED for name in self.actuators),
-                        *disturbances, *sim.sensors.channels]
-        self.params = dataclasses.asdict(sim.model.params)
+                        *disturbances, *system.channels]
+        self.params = dataclasses.asdict(system.model.params)
         self.meta = {"env": env_id, "seed": seed, "policy": policy,
-                     "policy_options": dict(policy_options), "dt": sim.dt,
+                     "policy_options": dict(policy_options), "dt": system.dt,
                      "env_kwargs": dict(env_kwargs or {}), "steps_requested": steps}
         if self.actuators:
             self.meta["actuator_noise"] = dict(zip(self.actuators, self._noise.tolist(),
@@ -114,7 +114,7 @@ class _Run:
                 if terminated:
                     self.terminated = True
                     self.stopped = (f"the episode terminated at step {k + 1} of {self.steps}: "
-                                    f"{why_terminated(self.sim)}")
+                                    f"{why_terminated(self.system, info['state'])}")
                     return
                 if truncated and k + 1 < self.steps:
                     self.stopped = (f"the environment truncated the episode at step {k + 1} "
@@ -164,9 +164,10 @@ def _actuator_noise(noise: float | Mapping[str, float], actuators: Sequence[str]
     return values
 
 
-def why_terminated(sim: Any) -> str:
-    """Which state of ``sim``'s first boat left the task's limits (angles in degrees)."""
-    model, task, x = sim.model, sim.task, sim.x[0]
+def why_terminated(system: Any, x: np.ndarray) -> str:
+    """Which entry of the state ``x`` (state units) left the task's limits of ``system``
+    (angles in degrees)."""
+    model, task = system.model, system.task
     for i, name in enumerate(model.state_names):
         if not np.isfinite(x[i]):
             return f"{name} is not finite"
@@ -222,7 +223,7 @@ def simulate(env_id: str, steps: int, seed: int | None = None, policy: str = "pr
                actuator_sensors, actuator_noise)
     rows = np.array(list(run.rows(progress)))
     data = pd.DataFrame(rows, columns=run.columns)
-    return Recording(data, run.sim.model.name, run.params, run.metadata())
+    return Recording(data, run.system.model.name, run.params, run.metadata())
 
 
 def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
@@ -244,7 +245,7 @@ def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
     """
     run = _Run(env_id, steps, seed, policy, env_kwargs, disturbances, policy_options,
                actuator_sensors, actuator_noise)
-    model = run.sim.model
+    model = run.system.model
     with _StopOnSignals() as stop, stream_recording(path, model.name, run.columns, run.params,
                                                    run.meta, chunk_rows) as out, \
             contextlib.closing(run.rows(progress)) as rows:  # closed (its bar too) on a break
@@ -257,7 +258,7 @@ def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
         if stop.signal is not None and out.rows < 2:
             stop.pass_on()  # nothing worth keeping: the signal acts as if it was never caught
         out.meta.update(run.metadata())
-    channels = run.sim.sensors.channels
+    channels = run.system.channels
     return Recorded(Path(path), model.name, out.rows, steps, out.last_time, run.stopped,
                     stop.signal, tuple(model.input_names),
                     tuple(name for name in model.output_names if name in channels),

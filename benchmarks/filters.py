@@ -75,7 +75,7 @@ def cell(vehicle: str, estimator: str, sensors: str, seeds: range,
     """LQR's (or the ``agents``') mean cost and failed episodes behind ``estimator``; None
     where LQR cannot read what it gives (the DP vessel's raw sensors are not its states)."""
     env_id = f"marine_envs/{vehicle}-v0"
-    kwargs = sensor_kwargs(sensors, gym.make(env_id).unwrapped.sim.sensors)
+    kwargs = sensor_kwargs(sensors, gym.make(env_id).unwrapped.system.sensors)
     policies = [(lambda venv, a=agent: a) for agent in agents] or ["lqr"]
     try:
         rows = [r for policy in policies

@@ -82,8 +82,8 @@ def run(env_id: str, estimator: str, sea: dict[str, float], boats: int, steps: i
     mean cost, weighted estimation error, and the bank's estimates over time (``kf_sea``)."""
     venv = evaluation.make_env(env_id, boats, estimator, env_kwargs=sea, max_episode_steps=steps)
     policy = LQRPolicy.for_env(venv, feedforward=False)
-    sim = venv.unwrapped.sim
-    q, n_x = np.asarray(sim.task.q), len(sim.model.state_names)
+    system = venv.unwrapped.system
+    q, n_x = np.asarray(system.task.q), len(system.model.state_names)
     obs, info = venv.reset(seed=seed)
     bank = getattr(venv, "estimator", None)
     errors, peaks, cost = [], [], np.zeros(boats)
@@ -101,12 +101,12 @@ def run(env_id: str, estimator: str, sea: dict[str, float], boats: int, steps: i
     venv.close()
     return {"cost": float(cost.mean()), "failed": int(failed.sum()),
             "error": float(np.sqrt(np.nanmean(errors))),
-            "peaks": np.array(peaks) if peaks else None, "dt": sim.dt}
+            "peaks": np.array(peaks) if peaks else None, "dt": system.dt}
 
 
 def sea_peak(env_id: str, sea: dict[str, float]) -> float:
     """The peak frequency (rad/s) of the first wave channel's shaping filter of ``sea``."""
-    peaks = disturbance_model(gym.make(env_id, **sea).unwrapped.sim).wave_peaks
+    peaks = disturbance_model(gym.make(env_id, **sea).unwrapped.system).wave_peaks
     return next(iter(peaks.values()))[0]
 
 
@@ -114,7 +114,7 @@ def case(vehicle: str, tp: float | None, hs: float, boats: int, seconds: float, 
          split: str) -> dict[str, Any]:
     env_id = f"marine_envs/{vehicle}-v0"
     sea = {"hs": hs, "tp": tp}
-    dt = gym.make(env_id).unwrapped.sim.dt
+    dt = gym.make(env_id).unwrapped.system.dt
     steps = int(round(seconds / dt))
     runs = {name: run(env_id, name, sea, boats, steps, seed)
             for name in ("kf", "kf_design_sea", "kf_sea")}
@@ -156,8 +156,7 @@ def plot_changing_sea(boats: int, bench: Run, path: Path = FIGURE) -> None:
     import matplotlib.pyplot as plt
 
     env_id = "marine_envs/Hydrofoil-v0"
-    sim = gym.make(env_id).unwrapped.sim
-    schedule = sim.disturbances.sea.hs
+    schedule = gym.make(env_id).unwrapped.system.disturbances.sea.hs
     result = run(env_id, "kf_sea", {}, boats, 12000, HELD_OUT_SEED)
     t = np.arange(result["peaks"].shape[0]) * result["dt"]
     fig, ax = plt.subplots(figsize=(8, 3.5))

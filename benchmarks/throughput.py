@@ -73,11 +73,12 @@ def target(vehicle: str, case: str | int) -> float | None:
 def _neutral_action(env: gym.Env | gym.vector.VectorEnv) -> np.ndarray | int:
     """An action that keeps episodes going: the nominal input of a marine vehicle (its trim),
     1 for CartPole."""
-    sim = getattr(env.unwrapped, "sim", None)
-    if sim is None:
+    system = getattr(env.unwrapped, "system", None)
+    if system is None:
         space = env.action_space
         return np.ones(space.shape, dtype=np.int64) if space.shape else 1
-    return np.broadcast_to(sim.nominal_action(), env.action_space.shape).astype(np.float32)
+    nominal = system.actuation.nominal_action(system.model)
+    return np.broadcast_to(nominal, env.action_space.shape).astype(np.float32)
 
 
 def single_stepper(env_id: str) -> Callable[[int], float]:
@@ -160,7 +161,8 @@ import marine_envs
 imported = time.perf_counter()
 env = gym.make({env_id!r})
 env.reset(seed=0)
-env.step(env.unwrapped.sim.nominal_action().astype(np.float32))
+system = env.unwrapped.system
+env.step(system.actuation.nominal_action(system.model).astype(np.float32))
 vec = gym.make_vec({env_id!r}, num_envs=4, vectorization_mode="vector_entry_point")
 vec.reset(seed=0)
 vec.step(np.zeros(vec.action_space.shape, dtype=np.float32))

@@ -3,8 +3,9 @@
 A white-noise filter (:func:`~estimators.kalman.default_process_noise`) treats waves, current and
 wind as independent from one control period to the next, so it trusts its model too long: a
 current that has pushed the vehicle for a minute will push it for the next. Here every
-disturbance channel of the environment gets the discrete model its source implies, and those
-models' states are appended to the vehicle's:
+disturbance channel of the environment gets the discrete model its source describes (each
+source's ``linear_model(dt)``, :mod:`marine_envs.sea.shaping`), and those models' states are
+appended to the vehicle's:
 
 * a Gauss-Markov channel (current, wind, gusts; :class:`~marine_envs.sea.processes.GaussMarkov`)
   its exact AR(1) sampling ``xi_{k+1} = a xi_k + w_k``, ``a = exp(-dt/T)``, ``Var w = std^2
@@ -14,7 +15,7 @@ models' states are appended to the vehicle's:
   the AR(2) ``xi_{k+1} = phi_1 xi_k + phi_2 xi_{k-1} + w_k`` whose autocovariance at lags 0, 1, 2
   is the sea's own (Yule-Walker on a long realisation of the env's own sea, so a sea whose
   height varies in time is averaged over its schedule): its peak frequency and damping are
-  :attr:`DisturbanceModel.wave_peaks`;
+  :attr:`~marine_envs.sea.shaping.DisturbanceModel.wave_peaks`;
 * a step event (the ROV's morph command; :class:`~marine_envs.sea.processes.StepEvent`) a random
   walk whose increments carry the jump's energy over its window.
 
@@ -40,18 +41,16 @@ Two more terms come from the environment's own models rather than being set by h
 
 from __future__ import annotations
 
-import copy
 import dataclasses
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from marine_envs.envs.system import System
 from marine_envs.models import zoh
 from marine_envs.models.linear import dlqr_gain
-from marine_envs.sea.processes import GaussMarkov, Stacked, StepEvent
-from marine_envs.sea.waves import WaveRealisation
+from marine_envs.sea.shaping import DisturbanceModel, linear_model_of, no_disturbance
 
 from .kalman import (
     AdaptiveKalmanFilter,
@@ -62,9 +61,6 @@ from .kalman import (
 )
 
 FloatArray = NDArray[np.float64]
-#: Steps of the env's own sea sampled for each wave channel's autocovariance (several episodes'
-#: worth, from fixed seeds: the same model every time).
-WAVE_SAMPLE_STEPS, WAVE_SAMPLE_SEEDS = 8192, (0, 1, 2, 3)
 #: The calibration run of the model error: boats (their seeds, apart from any evaluation's) and
 #: steps; and the initial states drawn for the prior.
 CALIBRATION_SEEDS, CALIBRATION_STEPS = tuple(range(900_000, 900_008)), 1000
@@ -76,169 +72,17 @@ PRIOR_DRAWS = 2000
 MODEL_ERROR_MARGIN = 10.0
 
 
-@dataclasses.dataclass(frozen=True)
-class DisturbanceModel:
-    """The discrete model of a vehicle's disturbances ``d_k`` (held over step k)::
+def disturbance_model(system: Any) -> DisturbanceModel:
+    """The :class:`~marine_envs.sea.shaping.DisturbanceModel` of a system's disturbance
+    source, which describes its own linear model (``linear_model(dt)``, module docstring); a
+    source without one is taken as white noise of its sampled covariance.
 
-        xi_{k+1} = F xi_k + w_k,   w_k ~ N(0, Q)
-        d_k      = mean + C xi_k + v_k,   v_k ~ N(0, white)   (the channels without memory)
-
-    :ivar names: a name per state of ``xi`` (the disturbance channel's, ``_prev`` for the lag of
-        a wave channel's AR(2)).
-    :ivar P0: the covariance of ``xi`` at an episode's start (its stationary one, or 0 where
-        the start is known).
-    :ivar wave_peaks: ``{channel: (peak frequency rad/s, damping ratio)}`` of each wave channel's
-        shaping filter (the AR(2)'s poles as a continuous second-order system).
+    :param system: an environment's :class:`~marine_envs.envs.system.System`.
     """
-
-    F: FloatArray
-    C: FloatArray
-    Q: FloatArray
-    P0: FloatArray
-    mean: FloatArray
-    white: FloatArray
-    names: tuple[str, ...]
-    wave_peaks: dict[str, tuple[float, float]]
-
-    @property
-    def size(self) -> int:
-        """Number of disturbance-model states."""
-        return len(self.names)
-
-
-def disturbance_model(sim: Any) -> DisturbanceModel:
-    """The :class:`DisturbanceModel` of a simulator's disturbance source (module docstring);
-    a source of another kind is taken as white noise of its sampled covariance."""
-    names = tuple(sim.model.disturbance_names)
-    if sim.disturbances is None or not names:
-        n = len(names)
-        return _combine([], n, np.zeros(n), np.zeros((n, n)))
-    return _model_of(sim.disturbances, names, sim.dt)
-
-
-def _model_of(source: Any, names: Sequence[str], dt: float) -> DisturbanceModel:
-    if isinstance(source, Stacked):
-        parts, start = [], 0
-        for part in source.sources:
-            parts.append(_model_of(part, names[start:start + part.width], dt))
-            start += part.width
-        return _stack(parts)
-    if isinstance(source, GaussMarkov):
-        return _gauss_markov(source, names)
-    if isinstance(source, StepEvent):
-        return _step_event(source, names, dt)
-    if isinstance(source, WaveRealisation):
-        return _waves(source, names, dt)
-    samples = _sample(source)
-    return _combine([], len(names), samples.mean(axis=0),
-                    np.atleast_2d(np.cov(samples, rowvar=False)))
-
-
-# a channel's block of states: (their names, F block, the channel's index, Q block, P0 block)
-_State = tuple[tuple[str, ...], FloatArray, int, FloatArray, FloatArray]
-
-
-def _gauss_markov(source: GaussMarkov, names: Sequence[str]) -> DisturbanceModel:
-    states: list[_State] = []
-    white = np.zeros(len(names))
-    for c, name in enumerate(names):
-        a, std = float(source.a[c]), float(source.std[c])
-        if std == 0.0:
-            continue  # a constant: its mean
-        if a == 0.0:
-            white[c] = std**2  # no memory: process noise
-            continue
-        states.append(((name,), np.array([[a]]), c, np.array([[source.gain[c] ** 2]]),
-                       np.array([[std**2]])))
-    return _combine(states, len(names), source.mean, np.diag(white))
-
-
-def _step_event(source: StepEvent, names: Sequence[str], dt: float) -> DisturbanceModel:
-    """A random walk per channel that jumps: the jump's square spread over the steps of the
-    window it falls in (or over the steps up to its fixed time); the start is known."""
-    span = source.window[1] - source.window[0] if source.window is not None else source.time
-    steps = max(float(span) / dt, 1.0)
-    states: list[_State] = []
-    for c, name in enumerate(names):
-        jump = float(source.after[c] - source.before[c])
-        if jump != 0.0:
-            states.append(((name,), np.array([[1.0]]), c, np.array([[jump**2 / steps]]),
-                           np.zeros((1, 1))))
-    return _combine(states, len(names), source.before, np.zeros((len(names), len(names))))
-
-
-def _waves(source: WaveRealisation, names: Sequence[str], dt: float) -> DisturbanceModel:
-    """Each wave channel's AR(2) by Yule-Walker on the autocovariance of the env's own sea."""
-    samples = [_sample(source, WAVE_SAMPLE_STEPS, seed) for seed in WAVE_SAMPLE_SEEDS]
-    mean = np.mean([s.mean(axis=0) for s in samples], axis=0)
-    states: list[_State] = []
-    peaks: dict[str, tuple[float, float]] = {}
-    for c, name in enumerate(names):
-        r0, r1, r2 = np.mean([_autocovariance(s[:, c], 3) for s in samples], axis=0)
-        if not r0 > 1e-12 * max(1.0, abs(mean[c])) ** 2:
-            continue  # a channel this sea does not move
-        det = r0 * r0 - r1 * r1
-        phi1, phi2 = r1 * (r0 - r2) / det, (r0 * r2 - r1 * r1) / det
-        innovation = max(r0 - phi1 * r1 - phi2 * r2, 1e-12 * r0)
-        states.append(((name, f"{name}_prev"), np.array([[phi1, phi2], [1.0, 0.0]]), c,
-                       np.diag([innovation, 0.0]), np.array([[r0, r1], [r1, r0]])))
-        peaks[name] = _second_order(phi1, phi2, dt)
-    model = _combine(states, len(names), mean, np.zeros((len(names), len(names))))
-    return dataclasses.replace(model, wave_peaks=peaks)
-
-
-def _second_order(phi1: float, phi2: float, dt: float) -> tuple[float, float]:
-    """Peak frequency (rad/s) and damping ratio of the AR(2)'s poles ``z = exp(s dt)``."""
-    s = np.log(np.roots([1.0, -phi1, -phi2]).astype(complex)) / dt
-    wn = float(np.abs(s).max())
-    return wn, float(-s.real.max() / wn) if wn > 0 else 1.0
-
-
-def _sample(source: Any, steps: int = 2000, seed: int = 0) -> FloatArray:
-    """One boat's realisation of a copy of ``source`` over ``steps`` steps (fixed seed)."""
-    copy_ = copy.deepcopy(source)
-    copy_.bind(1)
-    boat = np.array([0])
-    copy_.reset(boat, [np.random.default_rng(seed)])
-    # a block at a time, as the source's stream refills (the rows its steps would hand out)
-    chunks = [copy_.stream.blocks[0].copy()]
-    while sum(map(len, chunks)) < steps:
-        chunks.append(copy_.blocks(boat)[0])
-    return np.concatenate(chunks)[:steps]
-
-
-def _autocovariance(x: FloatArray, lags: int) -> FloatArray:
-    x = x - x.mean()
-    return np.array([x[:x.size - k] @ x[k:] / x.size for k in range(lags)])
-
-
-def _combine(states: list[_State], n_channels: int, mean: Any, white: FloatArray
-             ) -> DisturbanceModel:
-    import scipy.linalg  # (here: `import estimators` need not load it)
-
-    names = tuple(name for state in states for name in state[0])
-    C = np.zeros((n_channels, len(names)))
-    column = 0
-    for state_names, _, channel, _, _ in states:
-        C[channel, column] = 1.0  # the channel is the first state of its block
-        column += len(state_names)
-    F = scipy.linalg.block_diag(np.zeros((0, 0)), *(state[1] for state in states))
-    Q = scipy.linalg.block_diag(np.zeros((0, 0)), *(state[3] for state in states))
-    P0 = scipy.linalg.block_diag(np.zeros((0, 0)), *(state[4] for state in states))
-    return DisturbanceModel(F, C, Q, P0, np.asarray(mean, dtype=float).copy(), white, names, {})
-
-
-def _stack(parts: list[DisturbanceModel]) -> DisturbanceModel:
-    """Models of consecutive channel groups side by side."""
-    import scipy.linalg  # (here: `import estimators` need not load it)
-
-    def diag(attr: str) -> FloatArray:
-        return scipy.linalg.block_diag(np.zeros((0, 0)), *(getattr(p, attr) for p in parts))
-
-    peaks = {k: v for p in parts for k, v in p.wave_peaks.items()}
-    return DisturbanceModel(diag("F"), diag("C"), diag("Q"), diag("P0"),
-                            np.concatenate([p.mean for p in parts]), diag("white"),
-                            tuple(n for p in parts for n in p.names), peaks)
+    names = tuple(system.model.disturbance_names)
+    if system.disturbances is None or not names:
+        return no_disturbance(names)
+    return linear_model_of(system.disturbances, system.dt, names)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -271,21 +115,27 @@ class AugmentedSystem:
 
 def augmented_system(env: Any, model_error: bool = True, prior: bool = True
                      ) -> AugmentedSystem:
-    """The vehicle of ``env`` (single or vector, possibly wrapped) and its disturbances' model,
-    linearised at the task's reference and the disturbances' mean, discretised at the control
-    period (module docstring).
+    """:func:`augmented_system_for` the system of ``env`` (single or vector, possibly
+    wrapped)."""
+    return augmented_system_for(env.unwrapped.system, model_error, prior)
+
+
+def augmented_system_for(system: System, model_error: bool = True, prior: bool = True
+                         ) -> AugmentedSystem:
+    """The vehicle of ``system`` (an environment's) and its disturbances' model, linearised at
+    the task's reference and the disturbances' mean, discretised at the control period (module
+    docstring).
 
     :param model_error: add the linearisation's model error to the process noise
         (:func:`model_error_covariance`; else only a floor).
-    :param prior: start from the env's initial-state distribution (:func:`initial_prior`; else
-        from the reference with unit covariance, as :class:`~estimators.kalman.KalmanFilter`).
+    :param prior: start from the system's initial-state distribution (:func:`initial_prior`;
+        else from the reference with unit covariance, as :class:`~estimators.kalman.KalmanFilter`).
     """
     import scipy.linalg  # (here: `import estimators` need not load it)
 
-    sim = env.unwrapped.sim
-    model, dt = sim.model, sim.dt
-    dist = disturbance_model(sim)
-    x_ref, u_ref = np.asarray(sim.task.x_ref, dtype=float), np.asarray(sim.task.u_ref, dtype=float)
+    model, dt, task = system.model, system.dt, system.task
+    dist = disturbance_model(system)
+    x_ref, u_ref = np.asarray(task.x_ref, dtype=float), np.asarray(task.u_ref, dtype=float)
     A, B, E = model.linearize(x_ref, u_ref, d0=dist.mean)
     n_x, n_u, n_xi = A.shape[0], B.shape[1], dist.size
     Phi, Gamma = zoh(A, np.column_stack([B, E, model.rhs(x_ref, u_ref, dist.mean)]), dt)
@@ -298,56 +148,53 @@ def augmented_system(env: Any, model_error: bool = True, prior: bool = True
     c_x = c[:n_x]
     Q_x = G_d @ dist.white @ G_d.T
     if model_error:
-        Q_x = Q_x + MODEL_ERROR_MARGIN * model_error_covariance(sim, Phi, G_u, G_d, c_x,
-                                                                dist.mean)
+        Q_x = Q_x + MODEL_ERROR_MARGIN * model_error_covariance(system, Phi, G_u, G_d,
+                                                                c_x, dist.mean)
     # a floor keeps every state's prediction honest (per state, in its own unit)
     Q_x = (Q_x + Q_x.T) / 2 + np.diag(1e-9 * np.maximum(1.0, np.diag(Q_x)))
     Q = scipy.linalg.block_diag(Q_x, dist.Q)
-    channels = tuple(sim.sensors.channels)
+    channels = system.channels
     H_x, d = _output_matrix(model, channels, x_ref)
     H = np.hstack([H_x, np.zeros((len(channels), n_xi))])
-    x0_x, P0_x = initial_prior(sim) if prior else (x_ref, np.eye(n_x))
-    angular = tuple(ch for ch, w in zip(channels, _wrapped_channels(sim), strict=True) if w)
-    return AugmentedSystem(F, G, H, Q, default_measurement_noise(sim), c, d,
+    x0_x, P0_x = initial_prior(system) if prior else (x_ref, np.eye(n_x))
+    angular = tuple(ch for ch, w in zip(channels, _wrapped_channels(system), strict=True) if w)
+    return AugmentedSystem(F, G, H, Q, default_measurement_noise(system), c, d,
                            np.concatenate([x0_x, np.zeros(n_xi)]),
                            scipy.linalg.block_diag(P0_x, dist.P0), dt,
                            (*model.state_names, *dist.names), channels, angular, dist)
 
 
-def initial_prior(sim: Any) -> tuple[FloatArray, FloatArray]:
-    """Mean and covariance of the simulator's initial-state distribution (drawn from a fixed
+def initial_prior(system: System) -> tuple[FloatArray, FloatArray]:
+    """Mean and covariance of the system's initial-state distribution (drawn from a fixed
     seed), with a floor per state in its own unit (a state drawn exactly is still estimated)."""
     rng = np.random.default_rng(PRIOR_DRAWS)
-    draws = np.array([sim.initial_state(rng) for _ in range(PRIOR_DRAWS)])
+    draws = np.array([system.initial_state(rng) for _ in range(PRIOR_DRAWS)])
     P0 = np.atleast_2d(np.cov(draws, rowvar=False))
     P0 = (P0 + P0.T) / 2 + np.diag(1e-6 * np.maximum(1.0, np.diag(P0)))
     return draws.mean(axis=0), P0
 
 
-def model_error_covariance(sim: Any, Phi: FloatArray, G_u: FloatArray, G_d: FloatArray,
+def model_error_covariance(system: System, Phi: FloatArray, G_u: FloatArray, G_d: FloatArray,
                            c: FloatArray, mean: FloatArray) -> FloatArray:
     """The second moment of the one-step errors of ``x_{k+1} = Phi x_k + G_u u_k + G_d (d_k -
-    mean) + c`` along a calibration run of a copy of ``sim`` (:data:`CALIBRATION_SEEDS`, at
-    most :data:`CALIBRATION_STEPS` steps, a boat's steps after it failed left out) under the
+    mean) + c`` along a calibration run of the system (:meth:`System.simulator
+    <marine_envs.envs.system.System.simulator>`; :data:`CALIBRATION_SEEDS`, at most
+    :data:`CALIBRATION_STEPS` steps, a boat's steps after it failed left out) under the
     discrete LQR of ``(Phi, G_u)`` with the task's weights (the nominal input where no LQR
     exists). The disturbances are the run's own, so what remains is the linearisation's
     error."""
-    run = copy.deepcopy(sim)
     boats = len(CALIBRATION_SEEDS)
-    run.bind(boats)
+    run = system.simulator(boats)
     run.reset(np.arange(boats), [np.random.default_rng(s) for s in CALIBRATION_SEEDS])
-    gain = _regulator(sim, Phi, G_u)
-    x_ref, u_ref = sim.task.x_ref, sim.task.u_ref
-    matrix = sim.actuation.matrix
-    to_actuators = None if matrix is None else np.linalg.pinv(matrix)
+    gain = _regulator(system, Phi, G_u)
+    x_ref, u_ref = system.task.x_ref, system.task.u_ref
     running = np.ones(boats, dtype=bool)
     errors = []
     for _ in range(CALIBRATION_STEPS):
         x = run.x
         u = np.broadcast_to(u_ref, (boats, u_ref.size)) if gain is None else \
             u_ref - (x - x_ref) @ gain.T
-        f = u if to_actuators is None else u @ to_actuators.T
-        action = np.clip((f - run.u_mid) / run.u_scale, -1.0, 1.0)
+        action = np.clip(system.actuation.to_action(u), -1.0, 1.0)
         _, _, failed = run.step(action, measure=False)
         predicted = x @ Phi.T + run.u @ G_u.T + (run.d - mean) @ G_d.T + c
         errors.append((run.x - predicted)[running])
@@ -358,12 +205,12 @@ def model_error_covariance(sim: Any, Phi: FloatArray, G_u: FloatArray, G_d: Floa
     return e.T @ e / max(len(e), 1)
 
 
-def _regulator(sim: Any, Phi: FloatArray, G_u: FloatArray) -> FloatArray | None:
+def _regulator(system: System, Phi: FloatArray, G_u: FloatArray) -> FloatArray | None:
     """The discrete LQR gain of ``(Phi, G_u)`` with the task's weights (the design of
     :class:`agents.lqr.LQRPolicy`, discounted a little more: a calibration regulator need only
     keep the boats near the reference); None where no design exists."""
     try:
-        return dlqr_gain(Phi, G_u, sim.task.q, sim.task.r, discount=0.999)
+        return dlqr_gain(Phi, G_u, system.task.q, system.task.r, discount=0.999)
     except ValueError:
         return None
 
@@ -371,19 +218,29 @@ def _regulator(sim: Any, Phi: FloatArray, G_u: FloatArray) -> FloatArray | None:
 def disturbance_filter(env: Any, adaptive: bool = False, adaptive_ratio: float = 10.0,
                        model_error: bool = True, prior: bool = True,
                        **kwargs: Any) -> KalmanFilter:
-    """A Kalman filter of ``env``'s vehicle and its disturbances (:func:`augmented_system`);
-    with ``adaptive``, the hydrofoil AKF paper's adaptive filter on top of it (process noise
-    switched between the model's and ``adaptive_ratio`` times it).
+    """:func:`disturbance_filter_for` the system of ``env`` (single or vector, possibly
+    wrapped)."""
+    return disturbance_filter_for(env.unwrapped.system, adaptive, adaptive_ratio, model_error,
+                                  prior, **kwargs)
 
-    :param model_error, prior: see :func:`augmented_system`.
+
+def disturbance_filter_for(system: System, adaptive: bool = False, adaptive_ratio: float = 10.0,
+                           model_error: bool = True, prior: bool = True,
+                           **kwargs: Any) -> KalmanFilter:
+    """A Kalman filter of the system's vehicle and its disturbances
+    (:func:`augmented_system_for`); with ``adaptive``, the hydrofoil AKF paper's adaptive filter
+    on top of it (process noise switched between the model's and ``adaptive_ratio`` times it).
+
+    :param model_error, prior: see :func:`augmented_system_for`.
     :param kwargs: passed to the filter (``batch_size``, ``divergence_ratio``, ...).
     """
-    system = augmented_system(env, model_error, prior)
-    arguments = {**system.filter_arguments(), **kwargs}
+    augmented = augmented_system_for(system, model_error, prior)
+    arguments = {**augmented.filter_arguments(), **kwargs}
     if adaptive:
-        return AdaptiveKalmanFilter(**arguments, Q_max=adaptive_ratio * system.Q)
+        return AdaptiveKalmanFilter(**arguments, Q_max=adaptive_ratio * augmented.Q)
     return KalmanFilter(**arguments)
 
 
-__all__ = ["AugmentedSystem", "DisturbanceModel", "augmented_system", "disturbance_filter",
-           "disturbance_model", "initial_prior", "model_error_covariance"]
+__all__ = ["AugmentedSystem", "DisturbanceModel", "augmented_system", "augmented_system_for",
+           "disturbance_filter", "disturbance_filter_for", "disturbance_model", "initial_prior",
+           "model_error_covariance"]

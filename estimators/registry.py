@@ -113,7 +113,7 @@ def _akf_white(env: Any) -> Estimator:
     """The adaptive filter on the white-noise filter."""
     from .kalman import AdaptiveKalmanFilter, default_process_noise
 
-    Q = default_process_noise(env.unwrapped.sim)
+    Q = default_process_noise(env.unwrapped.system)
     return AdaptiveKalmanFilter.for_env(env, Q=Q, Q_max=10 * Q)
 
 
@@ -130,11 +130,11 @@ def _pd_observer(env: Any) -> Estimator:
 
     from .pd_observer import QuantizedPDObserver
 
-    sim = env.unwrapped.sim
-    if not isinstance(sim.model, USVModel):
+    system = env.unwrapped.system
+    if not isinstance(system.model, USVModel):
         raise ValueError(f"the USV observer patent's PD observer is designed for the USV, not "
-                         f"{sim.model.name}")
-    return QuantizedPDObserver.for_usv(sim.model, mu2=0.01, dt=sim.dt)
+                         f"{system.model.name}")
+    return QuantizedPDObserver.for_usv(system.model, mu2=0.01, dt=system.dt)
 
 
 def _wave_filter(env: Any) -> Estimator:
@@ -142,7 +142,7 @@ def _wave_filter(env: Any) -> Estimator:
     own wave-frequency model (the DP vessel only)."""
     from .wave_frequency import WaveFilter
 
-    w0 = getattr(env.unwrapped.sim.model.params, "w0", None)  # off the DP vessel: refused
+    w0 = getattr(env.unwrapped.system.model.params, "w0", None)  # off the DP vessel: refused
     return WaveFilter.for_env(env, **({} if w0 is None else {"w0": w0}))
 
 

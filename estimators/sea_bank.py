@@ -167,7 +167,7 @@ def sea_bank_filter(env: Any, periods: Sequence[float] | None = None,
     """
     options, spec = vehicle_options(env), env.unwrapped.spec  # one env per candidate sea
     try:
-        _sea(env.unwrapped.sim)
+        _sea(env.unwrapped.system)
     except ValueError:
         raise ValueError(f"{spec.id} has no wave-driven disturbance channel: its kf has no sea "
                          "to estimate") from None
@@ -199,20 +199,20 @@ def design_sea(env_id: str, options: Mapping[str, Any] | None = None) -> tuple[f
     """Peak period (s) and significant height (m) of the registered default sea of ``env_id``
     (made with ``options``): its highest height, and its period or, for the one-parameter
     Pierson-Moskowitz, the peak period that height implies."""
-    sea = _sea(gym.make(env_id, **dict(options or {})).unwrapped.sim)
+    sea = _sea(gym.make(env_id, **dict(options or {})).unwrapped.system)
     hs = sea.hs_range()[1]
     return (sea.tp if sea.tp is not None else 2 * np.pi * np.sqrt(hs) / PM_WP_COEF), hs
 
 
-def _sea(sim: Any) -> Any:
-    """The sea state of the simulator's wave realisation (alone or in a stack of sources)."""
-    sources = [sim.disturbances]
+def _sea(system: Any) -> Any:
+    """The sea state of the system's wave realisation (alone or in a stack of sources)."""
+    sources = [system.disturbances]
     while sources:
         source = sources.pop()
         if isinstance(source, WaveRealisation):
             return source.sea
         sources.extend(getattr(source, "sources", ()))
-    raise ValueError("the simulator has no wave realisation")
+    raise ValueError("the system has no wave realisation")
 
 
 __all__ = ["HEIGHT_FACTORS", "MEMORY", "PERIOD_FACTORS", "MultipleModelFilter", "design_sea",

@@ -34,10 +34,10 @@ def _estimate_space(estimator: Estimator) -> spaces.Box:
 
 
 def _check_channels(env: Any, estimator: Estimator) -> None:
-    sim = getattr(env.unwrapped, "sim", None)
-    if sim is not None and tuple(sim.sensors.channels) != tuple(estimator.measurement_names):
+    system = getattr(env.unwrapped, "system", None)
+    if system is not None and system.channels != tuple(estimator.measurement_names):
         raise ValueError(f"the estimator expects measurements {estimator.measurement_names}; "
-                         f"the environment's sensors give {tuple(sim.sensors.channels)}")
+                         f"the environment's sensors give {system.channels}")
 
 
 class EstimatorWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
@@ -177,7 +177,7 @@ class TrueStateWrapper(VectorWrapper):
 
     def __init__(self, env: VectorEnv) -> None:
         super().__init__(env)
-        model = env.unwrapped.sim.model
+        model = env.unwrapped.system.model
         self.state_names = tuple(model.state_names)
         big = np.finfo(np.float32).max
         self.single_observation_space = spaces.Box(-big, big, (len(self.state_names),),
@@ -185,7 +185,7 @@ class TrueStateWrapper(VectorWrapper):
         self.observation_space = batch_space(self.single_observation_space, env.num_envs)
 
     def _state(self) -> NDArray[np.float32]:
-        return self.env.unwrapped.sim.x.astype(np.float32)
+        return self.env.unwrapped.true_state.astype(np.float32)
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None):

@@ -42,7 +42,7 @@ def test_a_bad_sensor_degradation_is_refused_naming_it(spec, message):
 
 def test_a_sensor_degradation_scales_the_environments_own_noise():
     assert parse_sensor("noise=4+dropout=0.1") == {"noise": 4.0, "dropout": 0.1}
-    kwargs = benchmark.sensor_kwargs("noise=4+delay=2", gym.make(USV).unwrapped.sim.sensors)
+    kwargs = benchmark.sensor_kwargs("noise=4+delay=2", gym.make(USV).unwrapped.system.sensors)
     assert kwargs["noise_std"]["psi"] == pytest.approx(4 * np.radians(0.2))
     assert kwargs["delay"] == 2
 

@@ -28,13 +28,13 @@ from estimators.kalman import KalmanFilter
 SEEDS = list(range(3000, 3006))
 
 
-def sim_of(env_id: str, **kwargs):
-    return gym.make(env_id, **kwargs).unwrapped.sim
+def system_of(env_id: str, **kwargs):
+    return gym.make(env_id, **kwargs).unwrapped.system
 
 
 def test_gauss_markov_wind_is_its_exact_ar1_about_its_mean():
-    sim = sim_of("marine_envs/Hovercraft-v0")
-    wind, model = sim.disturbances, disturbance_model(sim)
+    system = system_of("marine_envs/Hovercraft-v0")
+    wind, model = system.disturbances, disturbance_model(system)
     assert model.names == ("wind_north", "wind_east")
     np.testing.assert_allclose(np.diag(model.F), wind.a)
     np.testing.assert_allclose(np.diag(model.Q), wind.std**2 * (1 - wind.a**2))
@@ -44,34 +44,34 @@ def test_gauss_markov_wind_is_its_exact_ar1_about_its_mean():
 
 
 def test_white_noise_channels_stay_process_noise():
-    sim = sim_of("marine_envs/DPVessel-v0")
-    model = disturbance_model(sim)
+    system = system_of("marine_envs/DPVessel-v0")
+    model = disturbance_model(system)
     assert model.size == 0  # the DP vessel's six inputs are white: no state to add
-    np.testing.assert_allclose(np.diag(model.white), sim.disturbances.std**2)
+    np.testing.assert_allclose(np.diag(model.white), system.disturbances.std**2)
 
 
 def test_step_event_is_a_random_walk_carrying_the_jump_over_its_window():
-    sim = sim_of("marine_envs/ROV-v0")
-    model = disturbance_model(sim)
+    system = system_of("marine_envs/ROV-v0")
+    model = disturbance_model(system)
     assert model.names == ("current_n", "current_e", "current_d", "s_cmd")
     morph = model.names.index("s_cmd")
     assert model.F[morph, morph] == 1.0 and model.P0[morph, morph] == 0.0
-    window = sim.disturbances.sources[1].window
-    assert model.Q[morph, morph] == pytest.approx(1.0 / ((window[1] - window[0]) / sim.dt))
-    np.testing.assert_allclose(model.mean[:3], sim.disturbances.sources[0].mean)
+    window = system.disturbances.sources[1].window
+    assert model.Q[morph, morph] == pytest.approx(1.0 / ((window[1] - window[0]) / system.dt))
+    np.testing.assert_allclose(model.mean[:3], system.disturbances.sources[0].mean)
 
 
 def test_wave_shaping_filter_peaks_where_an_unseen_realisation_of_the_sea_does():
     """The AR(2) of each USV wave channel peaks within 15 % of the periodogram peak of a
     realisation of a seed the fit never saw, and predicts most of the channel a step ahead."""
-    sim = sim_of("marine_envs/USV-v0")
-    model = disturbance_model(sim)
-    source = copy.deepcopy(sim.disturbances)
+    system = system_of("marine_envs/USV-v0")
+    model = disturbance_model(system)
+    source = copy.deepcopy(system.disturbances)
     source.bind(1)
     source.reset(np.array([0]), [np.random.default_rng(12345)])
     samples = np.concatenate([source.step() for _ in range(2 ** 14)])
-    for c, name in enumerate(sim.model.disturbance_names):
-        freq, power = scipy.signal.welch(samples[:, c], fs=1 / sim.dt, nperseg=2048)
+    for c, name in enumerate(system.model.disturbance_names):
+        freq, power = scipy.signal.welch(samples[:, c], fs=1 / system.dt, nperseg=2048)
         peak = 2 * np.pi * freq[np.argmax(power)]
         wn, zeta = model.wave_peaks[name]
         assert wn == pytest.approx(peak, rel=0.15), name
@@ -84,7 +84,7 @@ def test_wave_shaping_filter_peaks_where_an_unseen_realisation_of_the_sea_does()
 def test_augmented_model_predicts_the_vehicle_with_the_disturbance_states():
     env = gym.make("marine_envs/Hovercraft-v0")
     system = augmented_system(env)
-    n_x = len(env.unwrapped.sim.model.state_names)
+    n_x = len(env.unwrapped.system.model.state_names)
     assert system.state_names[n_x:] == ("wind_north", "wind_east")
     assert np.abs(system.F[:n_x, n_x:]).max() > 0  # the wind moves the craft
     np.testing.assert_array_equal(system.F[n_x:, :n_x], 0)  # and nothing moves the wind
@@ -98,7 +98,7 @@ def test_model_error_is_the_linearisations_own():
         env = gym.make(env_id)
         plain = augmented_system(env, model_error=False)
         full = augmented_system(env)
-        n_x = len(env.unwrapped.sim.model.state_names)
+        n_x = len(env.unwrapped.system.model.state_names)
         extra = np.diag(full.Q - plain.Q)[:n_x]
         if linear:
             assert extra.max() < 1e-12
@@ -108,15 +108,14 @@ def test_model_error_is_the_linearisations_own():
 
 
 def test_model_error_covariance_vanishes_for_the_exact_discrete_model():
-    sim = sim_of("marine_envs/USV-v0")
-    model = sim.model
-    A, B, E = model.linearize(sim.task.x_ref, sim.task.u_ref)
+    system = system_of("marine_envs/USV-v0")
+    model, x_ref, u_ref = system.model, system.task.x_ref, system.task.u_ref
+    A, B, E = model.linearize(x_ref, u_ref)
     from marine_envs.models import zoh
-    Phi, Gamma = zoh(A, np.column_stack([B, E, model.rhs(sim.task.x_ref, sim.task.u_ref)]),
-                     sim.dt)
+    Phi, Gamma = zoh(A, np.column_stack([B, E, model.rhs(x_ref, u_ref)]), system.dt)
     n_u = B.shape[1]
-    c = sim.task.x_ref - Phi @ sim.task.x_ref - Gamma[:, :n_u] @ sim.task.u_ref + Gamma[:, -1]
-    Q = model_error_covariance(sim, Phi, Gamma[:, :n_u], Gamma[:, n_u:-1], c,
+    c = x_ref - Phi @ x_ref - Gamma[:, :n_u] @ u_ref + Gamma[:, -1]
+    Q = model_error_covariance(system, Phi, Gamma[:, :n_u], Gamma[:, n_u:-1], c,
                                np.zeros(E.shape[1]))
     assert np.abs(Q).max() < 1e-20
 
@@ -125,15 +124,15 @@ def test_prior_is_the_envs_initial_state_distribution():
     """The DP vessel starts with a bias of tens of kN: the filter's prior says so."""
     env = gym.make("marine_envs/DPVessel-v0")
     system = augmented_system(env)
-    bias = env.unwrapped.sim.model.state_names.index("b_north")
-    sigma_b = env.unwrapped.sim.model.params.sigma_b[0]
+    bias = env.unwrapped.system.model.state_names.index("b_north")
+    sigma_b = env.unwrapped.system.model.params.sigma_b[0]
     assert np.sqrt(system.P0[bias, bias]) == pytest.approx(sigma_b, rel=0.1)
 
 
 def test_lqr_behind_kf_feeds_the_estimated_waves_forward():
     venv = make_env("marine_envs/USV-v0", 2, "kf")
     policy = LQRPolicy.for_env(venv)
-    n_x = len(venv.unwrapped.sim.model.state_names)
+    n_x = len(venv.unwrapped.system.model.state_names)
     assert policy.K.shape[1] > n_x and np.abs(policy.K[:, n_x:]).max() > 0
     plain = LQRPolicy.for_env(venv, feedforward=False)
     assert plain.K.shape[1] == n_x
@@ -181,7 +180,7 @@ def test_every_estimator_takes_nan_as_a_dropped_channel(vehicle):
     env = gym.make(f"marine_envs/{vehicle}-v0")
     y, info = env.reset(seed=7)
     y = np.asarray(y, dtype=float)[None]
-    u = np.asarray(env.unwrapped.sim.task.u_ref)[None]
+    u = np.asarray(env.unwrapped.system.task.u_ref)[None]
     gaps = y.copy()
     gaps[0, 0] = np.nan
     mask = np.ones(y.shape, dtype=bool)
@@ -202,4 +201,4 @@ def test_kf_is_a_kalman_filter_of_the_augmented_model():
     kf = registry.make("kf", env)
     assert isinstance(kf, KalmanFilter)
     assert kf.state_names[-1] == "s_cmd"
-    assert registry.make("kf_white", env).state_names == env.unwrapped.sim.model.state_names
+    assert registry.make("kf_white", env).state_names == env.unwrapped.system.model.state_names

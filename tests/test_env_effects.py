@@ -23,7 +23,7 @@ LIGHT = {"waves": False, "params": {"zeta": 0.02}}
 def roll_decay(env: gym.Env, phi0: float = math.radians(20), steps: int = 1200) -> Recording:
     """The environment's own record of a free roll decay (rudder held at zero)."""
     obs, info = env.reset(seed=1, options={"state": np.array([0, 0, 0, 0, phi0])})
-    channels = env.unwrapped.sim.sensors.channels
+    channels = env.unwrapped.system.channels
     rows = []
     for k in range(steps):
         rows.append((k * env.unwrapped.dt, 0.0, obs[channels.index("phi")]))
@@ -54,7 +54,7 @@ def test_effects_come_from_a_diagnosis_json_and_act_on_inputs_and_sensors(tmp_pa
     env.reset(seed=0, options={"state": np.zeros(5)})
     obs, _, _, _, info = env.step(np.ones(1))
     assert info["action_applied"][0] == pytest.approx(0.05 * env.unwrapped.dt)  # slew-limited
-    channels = env.unwrapped.sim.sensors.channels
+    channels = env.unwrapped.system.channels
     assert obs[channels.index("phi")] == pytest.approx(0.02, abs=1e-3)  # the bias, at rest
     vec = gym.make_vec("marine_envs/USV-v0", num_envs=2, vectorization_mode="vector_entry_point",
                        effects=str(path), waves=False)

@@ -109,18 +109,19 @@ def test_bad_actions_raise_and_lose_nothing(env_id):
 @pytest.mark.parametrize("env_id", IDS)
 def test_reward_is_minus_the_stage_cost_and_observation_is_the_sensors(env_id):
     env = gym.make(env_id, noise_std=0.0, quantization={})
-    sim = env.unwrapped.sim
+    system = env.unwrapped.system
     obs, info = env.reset(seed=2)
-    model = sim.model
+    model = system.model
     outputs = model.output(info["state"][None])[0]
-    channels = [model.output_names.index(c) for c in sim.sensors.channels]
+    channels = [model.output_names.index(c) for c in system.sensors.channels]
     np.testing.assert_allclose(obs, outputs[channels].astype(np.float32), atol=1e-6)
     rng = np.random.default_rng(0)
     for _ in range(3):
         x = info["state"].copy()
         _, reward, _, _, info = env.step(rng.uniform(-0.5, 0.5, env.action_space.shape))
-        e, v = x - sim.task.x_ref, info["action_applied"] - sim.task.u_ref
-        assert reward == pytest.approx(-(e @ (sim.task.q * e) + v @ (sim.task.r * v)), rel=1e-9)
+        task = system.task
+        e, v = x - task.x_ref, info["action_applied"] - task.u_ref
+        assert reward == pytest.approx(-(e @ (task.q * e) + v @ (task.r * v)), rel=1e-9)
 
 
 @pytest.mark.parametrize("env_id", IDS)
@@ -182,7 +183,7 @@ def test_rov_thruster_actions_pass_through_the_allocation_matrix():
     env.reset(seed=0)
     action = np.array([1.0, -1.0, 0.5, 0.0, -0.5, 1.0], dtype=np.float32)
     info = env.step(action)[4]
-    low, high = env.unwrapped.sim.actuation.low, env.unwrapped.sim.actuation.high
+    low, high = env.unwrapped.system.actuation.low, env.unwrapped.system.actuation.high
     forces = (low + high) / 2 + (high - low) / 2 * action
     np.testing.assert_allclose(info["action_applied"], THRUSTER_ALLOCATION @ forces)
     assert info["action_applied"][3] == 0.0  # no roll authority
@@ -239,7 +240,8 @@ def test_each_vector_twin_is_made_by_the_one_factory_and_exported(env_id):
 def test_task_weights_are_the_environments_cost():
     for model, env_id in (("usv", "USV"), ("rov", "ROV"), ("dp_vessel", "DPVessel")):
         q, r = task_weights(model)
-        sim = gym.make(f"marine_envs/{env_id}-v0").unwrapped.sim
-        np.testing.assert_array_equal(sim.task.q, [q.get(n, 0.0) for n in sim.model.state_names])
+        system = gym.make(f"marine_envs/{env_id}-v0").unwrapped.system
+        np.testing.assert_array_equal(system.task.q,
+                                      [q.get(n, 0.0) for n in system.model.state_names])
     with pytest.raises(ValueError, match="has no environment"):
         task_weights("nomoto")

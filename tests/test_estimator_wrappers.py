@@ -29,7 +29,7 @@ def test_wrapped_envs_pass_the_checkers(env_id):
     n = len(env.unwrapped.model.state_names)
     assert obs.shape == (n,) and obs.dtype == np.float32
     assert info["estimate"].shape == (n,) and info["covariance"].shape == (n, n)
-    assert info["innovation"].shape == (len(env.unwrapped.sim.sensors.channels),)
+    assert info["innovation"].shape == (len(env.unwrapped.system.channels),)
 
 
 NOISY = {"hs": 3.0, "tp": 9.0, "noise_std": 0.03}  # 1.7 deg, 1.7 deg/s: a cheap compass and gyro

@@ -75,15 +75,15 @@ def test_the_compile_note_can_be_silenced(monkeypatch, capsys):
 
 # -- None turns a sensor stage off ---------------------------------------------------------------
 def true_outputs(env: gym.Env, state: np.ndarray) -> np.ndarray:
-    sim = env.unwrapped.sim
-    idx = [sim.model.output_names.index(c) for c in sim.sensors.channels]
-    return sim.model.output(state[None])[0, idx]
+    system = env.unwrapped.system
+    idx = [system.model.output_names.index(c) for c in system.channels]
+    return system.model.output(state[None])[0, idx]
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_every_sensor_option_none_measures_the_true_output(env_id):
     env = gym.make(env_id, **SENSORS_OFF)
-    assert all(isinstance(s, WrapAngle) for s in env.unwrapped.sim.sensors.stages)
+    assert all(isinstance(s, WrapAngle) for s in env.unwrapped.system.sensors.stages)
     obs, info = env.reset(seed=3)
     rng = np.random.default_rng(3)
     for _ in range(5):
@@ -97,7 +97,7 @@ def test_every_sensor_option_none_measures_the_true_output(env_id):
 @pytest.mark.parametrize("env_id", ENV_IDS)
 def test_quantization_none_is_no_quantization_not_the_default_step(env_id):
     none, empty = (gym.make(env_id, quantization=q) for q in (None, {}))
-    assert not any(isinstance(s, Quantizer) for s in none.unwrapped.sim.sensors.stages)
+    assert not any(isinstance(s, Quantizer) for s in none.unwrapped.system.sensors.stages)
     rng = np.random.default_rng(1)
     actions = rng.uniform(-1, 1, (10, *none.action_space.shape))
     np.testing.assert_array_equal(rollout(none, actions, seed=1),
@@ -107,13 +107,13 @@ def test_quantization_none_is_no_quantization_not_the_default_step(env_id):
 def test_a_channel_mapped_to_none_is_unquantized_and_the_default_stays_when_omitted():
     mu = np.radians(0.5)
     default = gym.make("marine_envs/USV-v0")
-    assert any(isinstance(s, Quantizer) for s in default.unwrapped.sim.sensors.stages)
+    assert any(isinstance(s, Quantizer) for s in default.unwrapped.system.sensors.stages)
     mixed = gym.make("marine_envs/USV-v0", quantization={"psi": None, "phi": mu})
     phi_only = gym.make("marine_envs/USV-v0", quantization={"phi": mu})
     actions = np.full((20, 1), 0.3)
     observed = rollout(mixed, actions, seed=2)
     np.testing.assert_array_equal(observed, rollout(phi_only, actions, seed=2))
-    channels = mixed.unwrapped.sim.sensors.channels
+    channels = mixed.unwrapped.system.channels
     phi, psi = observed[:, channels.index("phi")], observed[:, channels.index("psi")]
     np.testing.assert_allclose(phi / mu, np.round(phi / mu), atol=1e-3)  # on the grid
     assert np.abs(psi / mu - np.round(psi / mu)).max() > 0.05  # off it: not quantized

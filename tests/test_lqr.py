@@ -10,6 +10,7 @@ import marine_envs  # noqa: F401
 from agents.evaluation import run_episode
 from agents.excitation import RandomSteps, Sine, Zero
 from agents.lqr import LQRPolicy, lqr, lqr_gain, lqr_integral, zoh
+from marine_envs.envs.system import Actuation
 from marine_envs.models import get_model
 
 
@@ -54,12 +55,13 @@ def test_integral_action_removes_the_heading_offset_of_a_constant_yaw_moment():
     plain = LQRPolicy.for_model(model, Q, R, dt=dt)
     integral = LQRPolicy.for_model(model, Q, R, dt=dt, integral={"psi": 50.0})
     d = np.array([0.003, 0.0])  # rad/s^2: a steady yaw moment (wind, current)
+    actuation = Actuation.direct(model)
     final = {}
     for name, policy in (("plain", plain), ("integral", integral)):
         x = np.zeros(5)
         for _ in range(3000):  # 300 s
             action, _ = policy.predict(x)
-            u = policy.u_mid + policy.u_half * action
+            u = actuation.to_input(action)
             x = Ad @ x + BEd @ np.concatenate([u, d])
         final[name] = x
     assert abs(final["plain"][2]) > 0.02  # rad: plain LQR leaves a heading offset (2.6 deg)
@@ -171,7 +173,7 @@ class TrueStateEstimate(gym.Wrapper):
 
     def __init__(self, env, names=None):
         super().__init__(env)
-        model_names = env.unwrapped.sim.model.state_names
+        model_names = env.unwrapped.system.model.state_names
         self.estimator = SimpleNamespace(state_names=names or (*model_names, "bias"))
         self.observation_space = gym.spaces.Box(-np.inf, np.inf, (len(model_names) + 1,))
 
@@ -211,11 +213,11 @@ def test_auto_without_an_estimator_uses_the_sensors_or_says_an_estimator_is_need
 
 def test_continuous_flag_applies_the_continuous_gain_at_the_env_period():
     env = gym.make("marine_envs/Hydrofoil-v0")
-    sim = env.unwrapped.sim
-    A, B, _ = sim.model.linearize(sim.task.x_ref, sim.task.u_ref)
+    system = env.unwrapped.system
+    A, B, _ = system.model.linearize(system.task.x_ref, system.task.u_ref)
     continuous = LQRPolicy.for_env(env, observed="state", continuous=True)
-    np.testing.assert_allclose(continuous.K, lqr_gain(A, B, np.diag(sim.task.q),
-                                                      np.diag(sim.task.r)), rtol=1e-9)
+    np.testing.assert_allclose(continuous.K, lqr_gain(A, B, np.diag(system.task.q),
+                                                      np.diag(system.task.r)), rtol=1e-9)
     discrete = LQRPolicy.for_env(env, observed="state")
     assert np.abs(discrete.K - continuous.K).max() > 0.01 * np.abs(continuous.K).max()
 

@@ -54,7 +54,7 @@ def test_the_wave_filters_are_the_dp_wave_frequency_patents():
     env = gym.make("marine_envs/DPVessel-v0")
     wave = registry.make("wave", env)
     assert isinstance(wave, WaveFilter)
-    np.testing.assert_allclose(wave.w0_initial, env.unwrapped.sim.model.params.w0)
+    np.testing.assert_allclose(wave.w0_initial, env.unwrapped.system.model.params.w0)
     assert isinstance(registry.make("wave_adaptive", env), AdaptiveWaveFilter)
 
 

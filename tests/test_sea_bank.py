@@ -80,9 +80,9 @@ def test_the_hydrofoil_bank_finds_a_sea_the_design_filter_gets_wrong():
     """A sea off the bank's grid and away from the design sea (seeds no setting was chosen
     on): after 60 s the bank's peak is within 10 % of the sea's, the design sea's is 26 % off."""
     env_id, sea = "marine_envs/Hydrofoil-v0", {"tp": 1.9, "hs": 0.12}
-    truth = next(iter(disturbance_model(gym.make(env_id, **sea).unwrapped.sim)
+    truth = next(iter(disturbance_model(gym.make(env_id, **sea).unwrapped.system)
                       .wave_peaks.values()))[0]
-    design = next(iter(disturbance_model(gym.make(env_id).unwrapped.sim)
+    design = next(iter(disturbance_model(gym.make(env_id).unwrapped.system)
                        .wave_peaks.values()))[0]
     assert abs(design / truth - 1) > 0.2
     assert design_sea(env_id) == pytest.approx((2.75, 0.3), abs=0.01)

@@ -52,13 +52,14 @@ def test_quantization_step_shows_in_the_observation():
 
 def test_reward_is_minus_the_lqr_stage_cost_of_state_and_input():
     env = gym.make(ENV_ID)
-    sim = env.unwrapped.sim
+    system = env.unwrapped.system
     _, info = env.reset(seed=2)
     for action in (0.5, -0.2, 1.0):
         x = info["state"].copy()
         _, reward, _, _, info = env.step(np.array([action], dtype=np.float32))
         u = info["action_applied"]
-        assert reward == pytest.approx(-(x @ (sim.task.q * x) + u @ (sim.task.r * u)), rel=1e-12)
+        task = system.task
+        assert reward == pytest.approx(-(x @ (task.q * x) + u @ (task.r * u)), rel=1e-12)
         assert u[0] == pytest.approx(action * math.radians(35))
 
 

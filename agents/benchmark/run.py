@@ -87,10 +87,10 @@ def run_cell(cell: Mapping[str, str], settings: Mapping[str, Any], out: str) -> 
             policy = lambda venv: agent  # noqa: E731
         else:
             policy = controller
-        sim = gym.make(env_id, **sea).unwrapped.sim  # its period and default sensors
+        system = gym.make(env_id, **sea).unwrapped.system  # its period and default sensors
         steps = None if settings["seconds"] is None else \
-            max(1, round(settings["seconds"] / sim.dt))
-        kwargs = {**sea, **sensor_kwargs(cell["sensor"], sim.sensors)}
+            max(1, round(settings["seconds"] / system.dt))
+        kwargs = {**sea, **sensor_kwargs(cell["sensor"], system.sensors)}
         rows = evaluate(env_id, policy, estimator, settings["seeds"], kwargs, steps)
     except (ValueError, ImportError, FloatingPointError) as error:  # a diverged model too
         return [{**cell, "status": f"n/a: {error}"}]

@@ -92,8 +92,7 @@ def simulate(seeds: int, phases: Sequence[tuple[float, Sequence[float]]], seed: 
         policy = LQRPolicy.for_env(gym.make(ENV_ID, params=params), observed="state")
         obs, info = env.reset(seed=seed + 1000 * k)
         if x_end is not None:  # the same vessels in the new sea
-            env.unwrapped.sim.x = x_end.copy()
-            obs, info = env.unwrapped.sim.measure().astype(np.float32), {"state": x_end}
+            obs, info = env.unwrapped.set_state(x_end), {"state": x_end}
         steps = round(seconds / DT)
         y, u, x = (np.empty((steps, seeds, n)) for n in (3, 3, 15))
         for i in range(steps):

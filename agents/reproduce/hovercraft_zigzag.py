@@ -98,7 +98,7 @@ def record(manoeuvre: str, duration: float, seed: int) -> tuple[Segment, np.ndar
     steps = int(round(duration / 0.1))
     env = gym.make(ENV_ID, zigzag=manoeuvre, wind_speed=0.0, wind_gust=0.0,
                    max_episode_steps=steps + 1)
-    model = env.unwrapped.sim.model
+    model = env.unwrapped.system.model
     obs, info = env.reset(seed=seed, options={"state": model.x0})
     ys, xs, us = [obs], [info["state"]], []
     action = np.zeros(env.action_space.shape, dtype=np.float32)  # ignored in zig-zag mode

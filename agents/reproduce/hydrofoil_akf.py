@@ -69,15 +69,15 @@ def _document_noise(env: gym.Env, W: np.ndarray) -> np.ndarray:
     """The document's ``Gamma WQ Gamma'`` with ``Gamma`` the zero-order-hold matrix of a noise
     entering every state equation (MATLAB's ``c2d`` of ``[B I]``): WQ is a continuous intensity
     per second. Taken per step instead (Gamma = I) it is so large that the filter does nothing."""
-    sim = env.unwrapped.sim
-    A, _, _ = sim.model.linearize(sim.task.x_ref, sim.task.u_ref)
-    return held_noise_covariance(A, np.eye(4), sim.dt, W)
+    system = env.unwrapped.system
+    A, _, _ = system.model.linearize(system.task.x_ref, system.task.u_ref)
+    return held_noise_covariance(A, np.eye(4), system.dt, W)
 
 
 @functools.cache
 def _sea_noise(hs: float) -> np.ndarray:
     """Process noise of the env's waves at a constant significant height ``hs``, m."""
-    return default_process_noise(gym.make(ENV_ID, hs=hs).unwrapped.sim)
+    return default_process_noise(gym.make(ENV_ID, hs=hs).unwrapped.system)
 
 
 def settings() -> list[Setting]:
@@ -119,7 +119,7 @@ def fly(setting: Setting, label: str, seeds: int, steps: int,
     estimator = setting.filters[label](single)
     env = wrap(env, estimator)
     policy = LQRPolicy.for_env(single, observed=None)
-    x_ref = single.unwrapped.sim.task.x_ref
+    x_ref = single.unwrapped.system.task.x_ref
     obs, info = env.reset(seed=0)
     errors = np.zeros((steps, seeds, 2))
     estimation = np.zeros((steps, seeds, 4))

@@ -190,7 +190,7 @@ def fly(seeds: int = 2, morph_time: float = 40.0, duration: float = 110.0,
     x0, _ = excitation(0.0)
     ekf = make_filter(model, batch, np.concatenate([guess, guess]), x0)
     tracker = FeedforwardTracker(model, DT, integral={"u": 4.0, "z": 1.0, "psi": 10.0})
-    sim = env.unwrapped.sim
+    actuation = env.unwrapped.system.actuation
     obs, info = env.reset(seed=seed, options={"state": x0})
     ekf.update(obs.astype(float), info["measurement_mask"])
     out = {"estimate": np.empty((steps, batch, cruise.size)), "std": np.empty((steps, batch,
@@ -203,7 +203,7 @@ def fly(seeds: int = 2, morph_time: float = 40.0, duration: float = 110.0,
         theta = ekf.parameters.copy()
         theta[seeds:] = cruise
         tau = tracker(ekf.x[:, :13], x_ref, np.tile(nu_dot, (batch, 1)), theta)
-        obs, _, terminated, _, info = env.step((tau - sim.u_mid) / sim.u_scale)
+        obs, _, terminated, _, info = env.step(actuation.to_action(tau))
         if terminated.any():
             raise RuntimeError(f"robot(s) {np.flatnonzero(terminated).tolist()} left the "
                                f"envelope at t = {(k + 1) * DT:.1f} s")

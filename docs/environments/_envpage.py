@@ -41,14 +41,14 @@ def _number(value: float) -> str:
 def spaces(env_id: str) -> Markdown:
     """Action and observation spaces, channels, units, period and episode length of ``env_id``."""
     env = gym.make(env_id)
-    sim, steps = env.unwrapped.sim, env.spec.max_episode_steps
-    model = sim.model
+    system, steps = env.unwrapped.system, env.spec.max_episode_steps
+    model = system.model
     low, high = model.u_bounds
     units = _units(model)
     inputs = ", ".join(f"`{n}` {_number(lo)} ... {_number(hi)} {u}" for n, lo, hi, u in
                        zip(model.input_names, low, high, model.input_units, strict=True))
     channels = ", ".join(f"`{c}` ({units.get(c, '')}, +-{_number(r)})" for c, r in
-                         zip(sim.sensors.channels, sim.sensors.output_range, strict=True))
+                         zip(system.sensors.channels, system.sensors.output_range, strict=True))
     rows = [
         ("Import", f'`gym.make("{env_id}")`'),
         ("Action space", f"`{env.action_space}`"),
@@ -92,7 +92,7 @@ def sensor_defaults(env_id: str) -> Markdown:
     """The default sensor settings of ``env_id`` per channel (SI units; angles also in deg)."""
     defaults = _module(env_id).DEFAULT_SENSORS
     env = gym.make(env_id)
-    channels, units = env.unwrapped.sim.sensors.channels, _units(env.unwrapped.model)
+    channels, units = env.unwrapped.system.channels, _units(env.unwrapped.model)
     env.close()
     options = [o for o in SENSOR_OPTIONS if o in defaults]
     rows = []

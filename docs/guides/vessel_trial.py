@@ -30,7 +30,7 @@ def roll_decay(heel_deg: float = 20.0, seconds: float = 120.0, seed: int = 1) ->
     x0 = np.zeros(5)
     x0[4] = math.radians(heel_deg)
     obs, info = env.reset(seed=seed, options={"state": x0})
-    channels = env.unwrapped.sim.sensors.channels
+    channels = env.unwrapped.system.channels
     rows = []
     for k in range(int(round(seconds / env.unwrapped.dt))):
         rows.append((k * env.unwrapped.dt, 0.0, obs[channels.index("p")],

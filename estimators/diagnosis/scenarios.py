@@ -367,7 +367,7 @@ def _env_channels(vehicle: str) -> tuple[str, ...]:
     import marine_envs  # noqa: F401
 
     env = gym.make(ENV_IDS[vehicle], disable_env_checker=True)
-    return tuple(env.unwrapped.sim.sensors.channels)
+    return env.unwrapped.system.channels
 
 
 def _references(vehicle: VehicleModel, kind: str, steps: int, dt: float,
@@ -418,8 +418,8 @@ def _environment(scenario: Scenario, noise: bool) -> Made:
     """The environment with the effects under its LQR autopilot (true state) and a manoeuvre;
     the commands recorded."""
     env, channels = _make_env(scenario, noise)
-    sim, model = env.unwrapped.sim, get_model(scenario.vehicle)
-    dt = sim.dt
+    system, model = env.unwrapped.system, get_model(scenario.vehicle)
+    dt = system.dt
     steps = int(round(scenario.duration / dt)) + 1
     K = _gain(model, dt)
     rng = np.random.default_rng([scenario.seed, 1])
@@ -428,9 +428,6 @@ def _environment(scenario: Scenario, noise: bool) -> Made:
     share = DITHER_SHARE.get(model.name, DEFAULT_DITHER_SHARE) * scenario.dither
     dither = _random_steps(len(low), steps, dt, (1.0, 4.0), rng) * share * (high - low) / 2
     free = [model.state_names.index(n) for n in UNREGULATED.get(model.name, ())]
-    act = sim.actuation
-    to_actuators = np.eye(len(low)) if act.matrix is None else np.linalg.pinv(act.matrix)
-    mid, half = (act.high + act.low) / 2, (act.high - act.low) / 2
     commands = COMMANDS.get(model.name, ())
     logged = [model.disturbance_names.index(c) for c in commands]
     times, inputs, seen, states, recorded = [], [], [], [], []
@@ -440,7 +437,7 @@ def _environment(scenario: Scenario, noise: bool) -> Made:
         error = x - x_ref[k]
         error[free] = 0.0
         u = np.clip(model.u0 - K @ error + dither[k], low, high)
-        action = np.clip((to_actuators @ u - mid) / half, -1, 1).astype(np.float32)
+        action = np.clip(system.actuation.to_action(u), -1, 1).astype(np.float32)
         times.append(info["time"])
         seen.append(np.asarray(obs, dtype=float))
         states.append(x)
@@ -477,7 +474,7 @@ def _make_env(scenario: Scenario, noise: bool) -> tuple[Any, tuple[str, ...]]:
         c: scale * (default[c] if isinstance(default, Mapping) else default) for c in channels}}
     if not noise:
         sensors["quantization"] = None
-    dt = gym.make(env_id, disable_env_checker=True, **sea).unwrapped.sim.dt
+    dt = gym.make(env_id, disable_env_checker=True, **sea).unwrapped.system.dt
     steps = int(round(scenario.duration / dt)) + 1
     env = gym.make(env_id, max_episode_steps=steps + 1, disable_env_checker=True,
                    effects=list(scenario.effects), **sea, **sensors)

@@ -34,7 +34,7 @@ from marine_envs.recording import TIME, Recording
 from .seaway import MIN_DURATION
 
 #: The sample step (s) every constant of the seaway method was tuned at: the environments'
-#: own (``env.unwrapped.sim.dt``); a record sampled faster is decimated to it.
+#: own (``env.unwrapped.system.dt``); a record sampled faster is decimated to it.
 SEAWAY_STEP = {"usv": 0.1, "rov": 0.1, "dp_vessel": 0.5, "hovercraft": 0.1, "hydrofoil": 0.05}
 DEFAULT_STEP = 0.1
 #: Peak memory of the seaway method per sample, bytes: the slope of the peak RSS of ``marine

@@ -47,10 +47,16 @@ class AdaptiveWaveFilter(Estimator):
     @classmethod
     def for_env(cls, env: Any, config: WaveFrequencyConfig | None = None,
                 **kwargs: Any) -> AdaptiveWaveFilter:
-        """For a ``DPVessel-v0`` environment; ``kwargs`` go to :meth:`WaveFilter.for_env`."""
-        dt = env.unwrapped.sim.dt
-        config = dataclasses.replace(config or WaveFrequencyConfig(), dt=dt)
-        wave_filter = WaveFilter.for_env(env, w0=config.omega_initial, **kwargs)
+        """:meth:`for_system` of a ``DPVessel-v0`` environment (possibly wrapped)."""
+        return cls.for_system(env.unwrapped.system, config, **kwargs)
+
+    @classmethod
+    def for_system(cls, system: Any, config: WaveFrequencyConfig | None = None,
+                   **kwargs: Any) -> AdaptiveWaveFilter:
+        """For the DP vessel's system (``env.unwrapped.system``); ``kwargs`` go to
+        :meth:`WaveFilter.for_system`."""
+        config = dataclasses.replace(config or WaveFrequencyConfig(), dt=system.dt)
+        wave_filter = WaveFilter.for_system(system, w0=config.omega_initial, **kwargs)
         return cls(wave_filter, WaveFrequencyEstimator(config))
 
     # the filter's arrays are the estimate

@@ -71,21 +71,26 @@ class WaveFilter(Estimator):
 
     @classmethod
     def for_env(cls, env: Any, w0: ArrayLike = SEED_OMEGA_INITIAL, **kwargs: Any) -> WaveFilter:
-        """A wave filter for a ``DPVessel-v0`` environment: its vessel parameters (except
-        ``w0``), control period, linearisation point and sensor noise."""
+        """:meth:`for_system` of a ``DPVessel-v0`` environment (possibly wrapped)."""
+        return cls.for_system(env.unwrapped.system, w0, **kwargs)
+
+    @classmethod
+    def for_system(cls, system: Any, w0: ArrayLike = SEED_OMEGA_INITIAL,
+                   **kwargs: Any) -> WaveFilter:
+        """A wave filter for the DP vessel's system (``env.unwrapped.system``): its vessel
+        parameters (except ``w0``), control period, linearisation point and sensor noise."""
         from ..kalman import default_measurement_noise
 
-        sim = env.unwrapped.sim
-        if not isinstance(sim.model, DPVesselModel):
+        if not isinstance(system.model, DPVesselModel):
             raise ValueError(f"a wave filter needs the DP vessel; the env's model is "
-                             f"{sim.model.name!r}")
-        if tuple(sim.sensors.channels) != CHANNELS:
-            raise ValueError(f"the env's sensors give {tuple(sim.sensors.channels)}; the wave "
-                             f"filter needs {CHANNELS}")
-        kwargs.setdefault("R", default_measurement_noise(sim))
-        kwargs.setdefault("x_ref", sim.task.x_ref)
-        kwargs.setdefault("u_ref", sim.task.u_ref)
-        return cls(sim.dt, w0, params=sim.model.params, **kwargs)
+                             f"{system.model.name!r}")
+        if tuple(system.sensors.channels) != CHANNELS:
+            raise ValueError(f"the env's sensors give {tuple(system.sensors.channels)}; the "
+                             f"wave filter needs {CHANNELS}")
+        kwargs.setdefault("R", default_measurement_noise(system))
+        kwargs.setdefault("x_ref", system.task.x_ref)
+        kwargs.setdefault("u_ref", system.task.u_ref)
+        return cls(system.dt, w0, params=system.model.params, **kwargs)
 
     # -- per-w0 matrices ---------------------------------------------------------------------
     def _matrices(self, w0: FloatArray) -> tuple[FloatArray, ...]:

@@ -30,6 +30,7 @@ from ..compiled import first_use
 from ..models.effects import Effect, read_effects
 from .core import Simulator
 from .rendering import TimeSeriesRenderer
+from .system import System
 
 _ONE = np.array([0])
 #: Builds the object whose ``draw(x, u, time)`` returns an RGB frame (and ``close()``);
@@ -100,6 +101,7 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
         _check_render_mode(render_mode, self.metadata)
         with first_use(_vehicle(type(self))):  # the model's equations, the step kernel
             sim = _with_effects(self.make_simulator(**kwargs), effects)
+            self._system = System.of(sim, _vehicle(type(self)))  # before any boat is bound
             sim.bind(1)
         plausibility.warn(plausibility.environment_arguments(self.make_simulator, kwargs), 3)
         self.sim, self.render_mode = sim, render_mode
@@ -113,6 +115,18 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     def model(self):
         """The vehicle model (physics only)."""
         return self.sim.model
+
+    @property
+    def system(self) -> System:
+        """What is simulated (read-only): the contract between the environment and whatever
+        designs from it (estimators, controllers, agents)."""
+        return self._system
+
+    @property
+    def true_state(self) -> np.ndarray:
+        """A copy of the boat's true state ``(n_x,)``, state units (for oracles and
+        evaluation; changing it changes nothing)."""
+        return self.sim.x[0].copy()
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode. ``options={"state": x0}`` sets the initial true state (state units)."""
@@ -176,6 +190,7 @@ class MarineVectorEnv(VectorEnv):
         self.single_action_space, self.single_observation_space = _spaces(sim)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._system = System.of(sim, _vehicle(type(self)))  # before any boat is bound
         with first_use(_vehicle(type(self))):  # the step kernel
             sim.bind(self.num_envs)
         self._rngs: list[np.random.Generator] = []
@@ -184,6 +199,30 @@ class MarineVectorEnv(VectorEnv):
         self._mask = np.ones(self.num_envs, dtype=bool)
         self._mask.flags.writeable = False
         self._renderer = None
+
+    @property
+    def system(self) -> System:
+        """What is simulated (read-only), as :attr:`MarineEnv.system`."""
+        return self._system
+
+    @property
+    def true_state(self) -> np.ndarray:
+        """A copy of every boat's true state ``(num_envs, n_x)``, state units."""
+        return self.sim.x.copy()
+
+    def set_state(self, x: np.ndarray) -> np.ndarray:
+        """Put every boat at the true state ``x`` ``(num_envs, n_x)`` (state units) within
+        its episode (an experiment that carries its vessels on into another environment) and
+        return what the sensors measure of it, ``(num_envs, m)``.
+
+        :raises ValueError: ``x`` of another shape, or not finite (nothing changed).
+        """
+        x = np.asarray(x, dtype=float)
+        shape = self.sim.x.shape
+        if x.shape != shape or not np.isfinite(x).all():
+            raise ValueError(f"state has shape {x.shape}; expected {shape}, finite")
+        self.sim.x = x.copy()
+        return self.sim.measure().astype(np.float32)
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None):

@@ -10,7 +10,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Literal, TypedDict
 
 import numpy as np
@@ -22,35 +22,17 @@ from ..models.integrate import ExactStep, RK4Step
 from ..sea.processes import DisturbanceSource
 from ..sensors import SensorSuite, as_index, per_channel
 from .kernel import CompiledStep
+from .system import Actuation, InitialState, Task
 
 FloatArray = NDArray[np.float64]
-
-
-@dataclasses.dataclass
-class Task:
-    """A regulation task: drive the state to ``x_ref`` with little input.
-
-    Stage cost of step k: ``(x_k - x_ref)' diag(q) (x_k - x_ref) + (u_k - u_ref)' diag(r)
-    (u_k - u_ref)``, exactly the discrete LQR cost, so an episode's return is minus the LQR cost
-    of its trajectory; the reward is ``-reward_scale * cost``. Angles enter the cost as the
-    model's (unwrapped) linear states, as they do in LQR. An episode terminates when a state
-    leaves ``[low, high]`` (state units; infinite where unconstrained).
-    """
-
-    q: FloatArray
-    r: FloatArray
-    x_ref: FloatArray
-    u_ref: FloatArray
-    low: FloatArray
-    high: FloatArray
-    reward_scale: float = 1.0
 
 
 def make_task(model: VehicleModel, weights: Mapping[str, float], input_weights: Mapping[str, float],
               *, reference: Mapping[str, float] | None = None,
               limits: Mapping[str, float | tuple[float, float]] | None = None,
               reward_scale: float = 1.0) -> Task:
-    """A :class:`Task` from weights, reference and limits given by state and input name.
+    """A :class:`~marine_envs.envs.system.Task` from weights, reference and limits given by
+    state and input name.
 
     :param reference: offsets from the model's nominal state ``x0``, by state name.
     :param limits: per state, ``a`` for ``|x| <= a`` or ``(low, high)``; the episode ends outside.
@@ -115,8 +97,6 @@ def uniform_initial_state(model: VehicleModel, spread: Mapping[str, float],
     return UniformInitialState(middle, half_width)
 
 
-InitialState = Callable[[np.random.Generator], FloatArray]
-
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class UniformInitialState:
@@ -128,36 +108,6 @@ class UniformInitialState:
 
     def __call__(self, rng: np.random.Generator) -> FloatArray:
         return self.middle + self.half_width * rng.uniform(-1.0, 1.0, self.half_width.size)
-
-
-@dataclasses.dataclass(frozen=True)
-class Actuation:
-    """How actions reach the model: each action in [-1, 1] commands an actuator over
-    ``[low, high]`` (its physical range), and ``matrix`` maps actuator outputs to the model's
-    inputs (``u = matrix @ f``; None = the actuators are the inputs), e.g. thruster forces to
-    generalised forces through an allocation matrix.
-
-    :param names: actuator names, one per action.
-    :param low, high: actuator ranges, actuator units.
-    :param matrix: ``(n_inputs, n_actuators)`` map, or None.
-    """
-
-    names: tuple[str, ...]
-    low: FloatArray
-    high: FloatArray
-    matrix: FloatArray | None = None
-
-    @classmethod
-    def direct(cls, model: VehicleModel) -> Actuation:
-        """Actions command the model's inputs over :attr:`VehicleModel.u_bounds`."""
-        low, high = model.u_bounds
-        return cls(model.input_names, np.asarray(low, float), np.asarray(high, float))
-
-    def __post_init__(self) -> None:
-        if not (len(self.names) == self.low.size == self.high.size
-                and np.all(self.low < self.high)):
-            raise ValueError(f"actuator ranges low={self.low.tolist()} high="
-                             f"{self.high.tolist()} are invalid for {self.names}: low < high")
 
 
 #: RK4's stability limit on the real axis: ``|lambda| h`` beyond it grows every step.
@@ -230,12 +180,9 @@ class Simulator:
                                            for c in sensors.channels]))
         self.actuation = Actuation.direct(model) if actuation is None else actuation
         self.n_actions = len(self.actuation.names)
-        low, high = self.actuation.low, self.actuation.high
-        # shaped (1, n): numpy broadcasts equal-rank operands faster
-        self.u_scale = ((high - low) / 2)[None, :]
-        self.u_mid = ((high + low) / 2)[None, :]
-        matrix = self.actuation.matrix
-        self._allocation = None if matrix is None else np.asarray(matrix, float).T.copy()
+        # the action map's (1, n) arrays, as the step kernel reads them
+        self.u_scale, self.u_mid = self.actuation.u_scale, self.actuation.u_mid
+        self._allocation = self.actuation.allocation
         limited = np.flatnonzero(np.isfinite(task.low) | np.isfinite(task.high))
         self._limited, self._limited_list = as_index(limited), limited
         self._low, self._high = task.low[limited][None, :], task.high[limited][None, :]
@@ -403,8 +350,7 @@ class Simulator:
             a = np.clip(a, -1.0, 1.0)
         else:
             self.clipped = self._never_clipped
-        f = self.u_mid + self.u_scale * a
-        self.u = f if self._allocation is None else f @ self._allocation
+        self.u = self.actuation.to_input(a)
         if self.actuators is not None:
             self._commanded = self.u
             self.u = self.actuators.step(self.u)
@@ -422,9 +368,7 @@ class Simulator:
     def nominal_action(self) -> FloatArray:
         """The normalised action that applies the model's nominal input ``u0`` (for thrusters:
         the least-squares allocation of it)."""
-        matrix = self.actuation.matrix
-        f = self.model.u0 if matrix is None else np.linalg.pinv(matrix) @ self.model.u0
-        return (f - self.u_mid[0]) / self.u_scale[0]
+        return self.actuation.nominal_action(self.model)
 
     def advance(self) -> tuple[FloatArray, NDArray[np.bool_]]:
         """One control period for every boat: returns ``(reward, failed)``.

@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..blocks import BLOCK, BlockSource
 from ..compiled import jit
+from .shaping import DisturbanceModel, StateBlock, channel_names, combine, linear_model_of, stack
 
 FloatArray = NDArray[np.float64]
 
@@ -30,6 +31,11 @@ class DisturbanceSource(Protocol):
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None: ...
 
     def step(self) -> FloatArray: ...
+
+
+def _check_period(dt: float) -> None:
+    if not (isinstance(dt, int | float) and math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt={dt!r} is invalid: the period the disturbances are held, > 0 s")
 
 
 def _channels(name: str, value: ArrayLike, width: int | None = None) -> FloatArray:
@@ -89,6 +95,29 @@ class GaussMarkov(BlockSource):
         _filter_block(block, idx, self._start, self._last, self.std, self.gain, self.a,
                       self._decay, self.mean)
         return block
+
+    def linear_model(self, dt: float, names: Sequence[str] | None = None) -> DisturbanceModel:
+        """The exact AR(1) sampling per channel, ``xi_{k+1} = a xi_k + w_k`` with ``Var w =
+        std^2 (1 - a^2)`` and a stationary start; white channels (``T = 0``) are white noise,
+        constant ones (``std = 0``) their mean. The process is sampled at the period it was
+        made with (``a``), which ``dt`` (s, the control period) is taken to be.
+
+        :param names: the channels' names (default ``d0, d1, ...``).
+        """
+        _check_period(dt)
+        names = channel_names(names, self.width)
+        states: list[StateBlock] = []
+        white = np.zeros(len(names))
+        for c, name in enumerate(names):
+            a, std = float(self.a[c]), float(self.std[c])
+            if std == 0.0:
+                continue  # a constant: its mean
+            if a == 0.0:
+                white[c] = std**2  # no memory: process noise
+                continue
+            states.append(((name,), np.array([[a]]), c, np.array([[self.gain[c] ** 2]]),
+                           np.array([[std**2]])))
+        return combine(states, len(names), self.mean, np.diag(white))
 
 
 @jit
@@ -165,6 +194,24 @@ class StepEvent(BlockSource):
         """Each boat's switching time this episode, s (on the step grid)."""
         return self._switch_step * self.dt
 
+    def linear_model(self, dt: float, names: Sequence[str] | None = None) -> DisturbanceModel:
+        """A random walk per channel that jumps: the jump's square spread over the steps of
+        ``dt`` (s) in the window it falls in (or up to its fixed time); the start is known.
+
+        :param names: the channels' names (default ``d0, d1, ...``).
+        """
+        _check_period(dt)
+        names = channel_names(names, self.width)
+        span = self.window[1] - self.window[0] if self.window is not None else self.time
+        steps = max(float(span) / dt, 1.0)
+        states: list[StateBlock] = []
+        for c, name in enumerate(names):
+            jump = float(self.after[c] - self.before[c])
+            if jump != 0.0:
+                states.append(((name,), np.array([[1.0]]), c, np.array([[jump**2 / steps]]),
+                               np.zeros((1, 1))))
+        return combine(states, len(names), self.before, np.zeros((len(names), len(names))))
+
 
 class Stacked(BlockSource):
     """Several sources side by side: their columns concatenated in the order given, in one
@@ -186,3 +233,18 @@ class Stacked(BlockSource):
 
     def blocks(self, idx: NDArray[np.intp]) -> FloatArray:
         return np.concatenate([source.blocks(idx) for source in self.sources], axis=2)
+
+    def linear_model(self, dt: float, names: Sequence[str] | None = None) -> DisturbanceModel:
+        """The sources' models side by side (a source without one: white noise of its sampled
+        covariance, :func:`~marine_envs.sea.shaping.linear_model_of`).
+
+        :param dt: the period the disturbances are held, s.
+        :param names: the channels' names (default ``d0, d1, ...``).
+        """
+        _check_period(dt)
+        names = channel_names(names, self.width)
+        parts, start = [], 0
+        for source in self.sources:
+            parts.append(linear_model_of(source, dt, names[start:start + source.width]))
+            start += source.width
+        return stack(parts)

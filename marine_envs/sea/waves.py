@@ -43,6 +43,17 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..blocks import BLOCK, BlockSource
 from ..compiled import jit
+from .shaping import (
+    WAVE_SAMPLE_SEEDS,
+    WAVE_SAMPLE_STEPS,
+    DisturbanceModel,
+    StateBlock,
+    autocovariance,
+    channel_names,
+    combine,
+    sample_blocks,
+    second_order,
+)
 from .spectra import MeasuredSpectrum, jonswap, pierson_moskowitz
 
 G = 9.81  #: gravity, m/s^2
@@ -332,6 +343,38 @@ class WaveRealisation(BlockSource):
         pos = np.interp(hs, self._hs_grid, np.arange(self._hs_grid.size))
         j = np.minimum(pos.astype(np.intp), self._hs_grid.size - 2)
         return j, pos - j
+
+    def linear_model(self, dt: float, names: Sequence[str] | None = None) -> DisturbanceModel:
+        """Each channel's second-order shaping filter: the AR(2) ``xi_{k+1} = phi_1 xi_k +
+        phi_2 xi_{k-1} + w_k`` whose autocovariance at lags 0, 1, 2 is this sea's own
+        (Yule-Walker on :data:`~marine_envs.sea.shaping.WAVE_SAMPLE_STEPS` steps from each of
+        :data:`~marine_envs.sea.shaping.WAVE_SAMPLE_SEEDS`, so a sea whose height varies in time
+        is averaged over its schedule); its poles as a continuous second-order system are the
+        model's ``wave_peaks``. A channel this sea does not move is its mean.
+
+        :param dt: the period the sea is sampled at, s (this realisation's ``dt``).
+        :param names: the channels' names (default ``d0, d1, ...``).
+        :raises ValueError: ``dt`` is not this realisation's period.
+        """
+        if dt != self.dt:
+            raise ValueError(f"dt={dt!r} is invalid: this sea is sampled every {self.dt} s")
+        names = channel_names(names, self.n_channels)
+        samples = [sample_blocks(self, WAVE_SAMPLE_STEPS, seed) for seed in WAVE_SAMPLE_SEEDS]
+        mean = np.mean([s.mean(axis=0) for s in samples], axis=0)
+        states: list[StateBlock] = []
+        peaks: dict[str, tuple[float, float]] = {}
+        for c, name in enumerate(names):
+            r0, r1, r2 = np.mean([autocovariance(s[:, c], 3) for s in samples], axis=0)
+            if not r0 > 1e-12 * max(1.0, abs(mean[c])) ** 2:
+                continue  # a channel this sea does not move
+            det = r0 * r0 - r1 * r1
+            phi1, phi2 = r1 * (r0 - r2) / det, (r0 * r2 - r1 * r1) / det
+            innovation = max(r0 - phi1 * r1 - phi2 * r2, 1e-12 * r0)
+            states.append(((name, f"{name}_prev"), np.array([[phi1, phi2], [1.0, 0.0]]), c,
+                           np.diag([innovation, 0.0]), np.array([[r0, r1], [r1, r0]])))
+            peaks[name] = second_order(phi1, phi2, dt)
+        model = combine(states, len(names), mean, np.zeros((len(names), len(names))))
+        return dataclasses.replace(model, wave_peaks=peaks)
 
     def sample(self, n_steps: int, rng: np.random.Generator) -> NDArray[np.float64]:
         """One boat's realisation over ``n_steps`` steps (n_steps x channels), for analysis."""
