@@ -48,7 +48,8 @@ def test_the_do_nothing_baseline_is_one_policy_with_the_old_excitations_actions(
     with pytest.warns(DeprecatedPolicyName):
         old_name = policies.make_policy("zero", env)
     zero = Zero(env.action_space.shape[0], env.unwrapped.dt)  # what "zero" was
-    zero.centre = env.unwrapped.sim.nominal_action()
+    system = env.unwrapped.system
+    zero.centre = system.actuation.nominal_action(system.model)
     obs = env.observation_space.sample()
     for policy in (nominal, old_name):
         action, _ = policy.predict(obs)

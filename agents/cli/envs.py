@@ -25,9 +25,10 @@ def handle(args: argparse.Namespace) -> int:
 
     for env_id in ENVIRONMENTS:
         env = gym.make(env_id)
-        sim = env.unwrapped.sim
-        print(f"{env_id}\n  model {sim.model.name}: states {', '.join(sim.model.state_names)}; "
-              f"inputs {', '.join(sim.model.input_names)}\n  observation "
-              f"{', '.join(sim.sensors.channels)} {env.observation_space}\n  action "
-              f"{env.action_space}, dt {sim.dt} s")
+        system = env.unwrapped.system
+        model = system.model
+        print(f"{env_id}\n  model {model.name}: states {', '.join(model.state_names)}; "
+              f"inputs {', '.join(model.input_names)}\n  observation "
+              f"{', '.join(system.channels)} {env.observation_space}\n  action "
+              f"{env.action_space}, dt {system.dt} s")
     return 0

@@ -239,17 +239,17 @@ class ExtendedKalmanFilter(Estimator):
             step squared over 12.
         :param kwargs: as :meth:`from_model` (``parameters``, ``parameter_noise``, ``P0``, ...).
         """
-        sim = env.unwrapped.sim
-        Q = default_process_noise(sim) if Q is None else Q
-        R = default_measurement_noise(sim) if R is None else R
-        kwargs.setdefault("angular", wrapped_channel_names(sim))
-        kwargs.setdefault("sensor_range", sensor_range(sim))
-        kwargs.setdefault("substeps", getattr(sim.integrate, "substeps", 1))
+        system = env.unwrapped.system
+        Q = default_process_noise(system) if Q is None else Q
+        R = default_measurement_noise(system) if R is None else R
+        kwargs.setdefault("angular", wrapped_channel_names(system))
+        kwargs.setdefault("sensor_range", sensor_range(system))
+        kwargs.setdefault("substeps", system.substeps)
         params = tuple(kwargs.get("parameters", ()))
-        x_ref = np.concatenate([sim.task.x_ref, [getattr(sim.model.params, p) for p in params]])
+        model = system.model
+        x_ref = np.concatenate([system.task.x_ref, [getattr(model.params, p) for p in params]])
         kwargs.setdefault("x0", x_ref)
-        return cls.from_model(sim.model, sim.dt, measured=sim.sensors.channels, Q=Q, R=R,
-                              **kwargs)
+        return cls.from_model(model, system.dt, measured=system.channels, Q=Q, R=R, **kwargs)
 
     # -- views ------------------------------------------------------------------------------
     @property
@@ -574,12 +574,12 @@ def _sensor_range(sensor_range: tuple[ArrayLike, ArrayLike] | None, m: int
     return low, high
 
 
-def sensor_range(sim: Any) -> tuple[FloatArray, FloatArray] | None:
+def sensor_range(system: Any) -> tuple[FloatArray, FloatArray] | None:
     """The full-scale range ``(low, high)`` of the environment's sensor channels (their
     :class:`~marine_envs.sensors.Saturation` stages; None without one)."""
-    m = len(sim.sensors.channels)
+    m = len(system.sensors.channels)
     low, high = np.full(m, -np.inf), np.full(m, np.inf)
-    for stage in sim.sensors.stages:
+    for stage in system.sensors.stages:
         if isinstance(stage, Saturation):
             low = np.maximum(low, np.ravel(stage.low))
             high = np.minimum(high, np.ravel(stage.high))

@@ -53,9 +53,9 @@ def linearised_model(model: VehicleModel, dt: float, measured: Sequence[str],
     return Phi, G, H, c, d
 
 
-def wrapped_channel_names(sim: Any) -> list[str]:
+def wrapped_channel_names(system: Any) -> list[str]:
     """The channels of the environment's sensors that are angles wrapped to (-pi, pi]."""
-    return [c for c, w in zip(sim.sensors.channels, _wrapped_channels(sim), strict=True) if w]
+    return [c for c, w in zip(system.sensors.channels, _wrapped_channels(system), strict=True) if w]
 
 
 def _output_matrix(model: VehicleModel, measured: Sequence[str],
@@ -76,18 +76,18 @@ def _output_matrix(model: VehicleModel, measured: Sequence[str],
     return H, model.output(x_ref[None])[0, rows] - H @ x_ref
 
 
-def _wrapped_channels(sim: Any) -> list[bool]:
-    wrapped = np.zeros(len(sim.sensors.channels), dtype=bool)
-    for stage in sim.sensors.stages:
+def _wrapped_channels(system: Any) -> list[bool]:
+    wrapped = np.zeros(len(system.sensors.channels), dtype=bool)
+    for stage in system.sensors.stages:
         if isinstance(stage, WrapAngle):
             wrapped[stage.idx] = True
     return wrapped.tolist()
 
 
-def default_measurement_noise(sim: Any) -> NDArray[np.float64]:
+def default_measurement_noise(system: Any) -> NDArray[np.float64]:
     """Each channel's noise variance plus its quantization step squared over 12 (diagonal)."""
-    var = np.zeros(len(sim.sensors.channels))
-    for stage in sim.sensors.stages:
+    var = np.zeros(len(system.sensors.channels))
+    for stage in system.sensors.stages:
         if isinstance(stage, GaussianNoise):
             var += np.asarray(stage.std, dtype=float).ravel() ** 2
         elif isinstance(stage, Quantizer):
@@ -96,22 +96,22 @@ def default_measurement_noise(sim: Any) -> NDArray[np.float64]:
     return np.diag(np.maximum(var, floor))
 
 
-def default_process_noise(sim: Any, steps: int = 2000, seed: int = 0) -> NDArray[np.float64]:
+def default_process_noise(system: Any, steps: int = 2000, seed: int = 0) -> NDArray[np.float64]:
     """The covariance of the environment's disturbances over one ``steps``-long run of a fixed
     seed, held over each control period and mapped through the model's ``E`` at the reference."""
-    model = sim.model
+    model = system.model
     n_d = len(model.disturbance_names)
-    A, _, E = model.linearize(sim.task.x_ref, sim.task.u_ref)
-    if sim.disturbances is None or n_d == 0:
+    A, _, E = model.linearize(system.task.x_ref, system.task.u_ref)
+    if system.disturbances is None or n_d == 0:
         sigma = np.zeros((n_d, n_d))
     else:
-        source = copy.deepcopy(sim.disturbances)
+        source = copy.deepcopy(system.disturbances)
         source.bind(1)
         source.reset(np.array([0]), [np.random.default_rng(seed)])
         samples = np.concatenate([source.step() for _ in range(steps)])
         sigma = np.atleast_2d(np.cov(samples, rowvar=False))
     n = A.shape[0]
-    Q = held_noise_covariance(A, E, sim.dt, sigma) if n_d else np.zeros((n, n))
+    Q = held_noise_covariance(A, E, system.dt, sigma) if n_d else np.zeros((n, n))
     # a floor keeps every state's prediction honest about the model's own errors; per state, in
     # its own unit (a trace would mix N^2 of a bias with rad^2 of a heading)
     return Q + np.diag(1e-9 * np.maximum(1.0, np.diag(Q)))

@@ -139,13 +139,12 @@ class KalmanFilter(Estimator):
         :param R: measurement noise; default: each sensor's noise variance plus its quantization
             step squared over 12.
         """
-        sim = env.unwrapped.sim
-        model = sim.model
-        Q = default_process_noise(sim) if Q is None else Q
-        R = default_measurement_noise(sim) if R is None else R
-        kwargs.setdefault("angular", wrapped_channel_names(sim))
-        return cls.from_model(model, sim.dt, measured=sim.sensors.channels, Q=Q, R=R,
-                              x_ref=sim.task.x_ref, u_ref=sim.task.u_ref, **kwargs)
+        system = env.unwrapped.system
+        Q = default_process_noise(system) if Q is None else Q
+        R = default_measurement_noise(system) if R is None else R
+        kwargs.setdefault("angular", wrapped_channel_names(system))
+        return cls.from_model(system.model, system.dt, measured=system.channels, Q=Q, R=R,
+                              x_ref=system.task.x_ref, u_ref=system.task.u_ref, **kwargs)
 
     # -- the estimator contract ------------------------------------------------------------
     # The covariance does not depend on the data: filters started alike and measured alike share
