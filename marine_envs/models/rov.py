@@ -77,6 +77,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..compiled import Equations, evaluate, jit, local_array, rows
 from .base import CompiledParameters, FloatArray, VehicleModel, require
 from .kinematics import body_to_ned, euler_rates, ned_to_body, skew
+from .rov_coefficients import coefficient_parameters
 from .rov_params import (
     HYDRO_COEFFICIENTS,
     MORPHING,
@@ -506,8 +507,6 @@ class ROVModel(VehicleModel):
         (:mod:`marine_envs.models.rov_coefficients`); None for any other name."""
         if not set(names) <= set(HYDRO_COEFFICIENTS):
             return None
-        from .rov_coefficients import coefficient_parameters  # (it imports this module)
-
         return coefficient_parameters(self, tuple(names), rov_features, MORPHING)
 
     def _batch_with(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None,

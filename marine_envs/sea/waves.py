@@ -29,6 +29,12 @@ A significant wave height that varies in time (:class:`Schedule`) scales the amp
 when the spectral shape itself follows Hs (the one-parameter PM, ``tp=None``) the amplitudes are
 tabulated over Hs and interpolated, and boats whose blocks start at the same time share one
 matrix product (a reset boat starts again at 0 s, where others have been).
+
+A reset costs about a step: a boat reset alone (a single environment) sums its first block with
+each component's gains interpolated once where Hs holds over the block (as it does at the start
+of the schedules), the channels a coupling leaves at zero are not summed, and the products run
+on one BLAS thread (:func:`~marine_envs.blas.one_blas_thread`: a split between threads costs
+more than it saves, and rounds a row differently). The numbers are those of the plain sums.
 """
 
 from __future__ import annotations
