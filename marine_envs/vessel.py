@@ -82,6 +82,11 @@ class VesselDescription:
                              f"{', '.join(model_names())}")
         nominal = get_model(self.vehicle)
         nominal.check_parameter_names(self.params)
+        for name, value in self.params.items():
+            if isinstance(getattr(nominal.params, name), float) and (
+                    isinstance(value, bool) or not isinstance(value, int | float)):
+                raise ValueError(f"params of vehicle {self.vehicle!r}: {name}={value!r} must "
+                                 "be a number")
         try:
             return nominal.with_params(**self.params)
         except (TypeError, ValueError) as error:

@@ -278,7 +278,7 @@ def vector_env(single: type[MarineEnv], max_episode_steps: int = 1000) -> type[M
                  render_mode: str | None = None, effects: EffectsArg = (),
                  **kwargs: Any) -> None:
         with first_use(_vehicle(single)):  # the model's equations
-            sim = _with_effects(single.make_simulator, kwargs, effects, single.__name__)
+            sim = _with_effects(single.make_simulator, kwargs, effects, type(self).__name__)
         plausibility.warn(plausibility.environment_arguments(single.make_simulator, kwargs), 3)
         MarineVectorEnv.__init__(self, sim, num_envs, max_episode_steps, render_mode=render_mode,
                                  renderer=_renderer(single.renderer, sim))
