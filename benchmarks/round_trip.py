@@ -89,13 +89,23 @@ def round_trip(name: str, recording: Recording, folder: Path) -> dict[str, Any]:
             "passed": after <= TOLERANCE * held_out}
 
 
+#: The table's columns: heading, and the cell of a row (text columns left, numbers right).
+COLUMNS = (("decay", "{case}"), ("findings", "{findings}"),
+           ("findings only (before), deg", "{before:.3f}"),
+           ("effects=JSON (after), deg", "{after:.3f}"), ("by hand, deg", "{by_hand:.3f}"),
+           ("held-out error, deg", "{held_out:.3f}"), ("after / held-out", "{ratio:.2f}"),
+           ("within 2x", "{verdict}"))
+
+
 def format_table(rows: Sequence[Mapping[str, Any]]) -> str:
-    lines = ["| decay | findings | findings only (before), deg | effects=JSON (after), deg | "
-             "by hand, deg | held-out error, deg | after / held-out | within 2x |",
-             "| --- | --- | ---: | ---: | ---: | ---: | ---: | --- |"]
-    lines += [f"| {r['case']} | {r['findings'] or '-'} | {r['before']:.3f} | {r['after']:.3f} | "
-              f"{r['by_hand']:.3f} | {r['held_out']:.3f} | {r['ratio']:.2f} | "
-              f"{'PASS' if r['passed'] else 'FAIL'} |" for r in rows]
+    """A Markdown table, one row per decay (:data:`COLUMNS`)."""
+    lines = ["| " + " | ".join(heading for heading, _ in COLUMNS) + " |",
+             "|" + "|".join(" ---: " if ":" in cell else " --- " for _, cell in COLUMNS)
+             + "|"]
+    for row in rows:
+        values = {**row, "findings": row["findings"] or "-",
+                  "verdict": "PASS" if row["passed"] else "FAIL"}
+        lines.append("| " + " | ".join(cell.format(**values) for _, cell in COLUMNS) + " |")
     return "\n".join(lines)
 
 

@@ -93,8 +93,10 @@ class VesselDescription:
             raise ValueError(f"params of vehicle {self.vehicle!r}: {error}") from None
 
     def check_vehicle(self, vehicle: str, environment: str) -> None:
-        """:raises ValueError: the description is of another vehicle than ``vehicle``, the
-        model of ``environment`` (naming both)."""
+        """Check that ``environment``, which simulates ``vehicle``, may take this vessel.
+
+        :raises ValueError: the description is of another vehicle (naming both).
+        """
         if self.vehicle is not None and self.vehicle != vehicle:
             raise ValueError(f"effects describe a vessel of vehicle {self.vehicle!r}; "
                              f"{environment} simulates vehicle {vehicle!r}")
@@ -105,7 +107,10 @@ class VesselDescription:
         return {**self.params, **(given or {})}
 
     def to_dict(self) -> dict[str, Any]:
-        """The schema's JSON object. :raises ValueError: a description without a vehicle."""
+        """The schema's JSON object.
+
+        :raises ValueError: a description without a vehicle.
+        """
         if self.vehicle is None:
             raise ValueError("a vessel description needs its vehicle to be written")
         out: dict[str, Any] = {"vehicle": self.vehicle, "params": dict(self.params),
@@ -123,8 +128,11 @@ class VesselDescription:
 
     @classmethod
     def from_dict(cls, document: Any, where: str = "the vessel description") -> VesselDescription:
-        """A description from its JSON object. :raises ValueError: a malformed one, naming
-        ``where`` and the offending key, parameter or effect."""
+        """A description from its JSON object.
+
+        :raises ValueError: a malformed one, naming ``where`` and the offending key, parameter
+            or effect.
+        """
         try:
             if not isinstance(document, Mapping):
                 raise ValueError(f"a JSON object {{{', '.join(KEYS[:3])}}} expected, not "
