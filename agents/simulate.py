@@ -1,6 +1,8 @@
 """``marine simulate``: record an episode of any environment in the recording format, in
 memory (:func:`~agents.simulate.simulate`) or streamed to a file as it runs
-(:func:`~agents.simulate.record`)."""
+(:func:`~agents.simulate.record`); under an excitation signal, LQR, or the commands of another
+recording replayed (``replay=``, ``marine simulate --replay RECORD``: the recorded commands
+through the environment's vessel, e.g. a diagnosed one, ``effects="diagnosis.json"``)."""
 
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 import marine_envs  # noqa: F401  (registers the environments)
+from marine_envs.envs import System
 from marine_envs.recording import APPLIED, CHUNK_ROWS, Recording, stream_recording
 
 from .policies import LQR_STATE, canonical, make_policy, names
@@ -56,16 +59,20 @@ class _Run:
     """One simulation of :func:`simulate` and :func:`record`: the environment and policy,
     checked before any step, and the rows of the recording step by step."""
 
-    def __init__(self, env_id: str, steps: int, seed: int | None, policy: str,
+    def __init__(self, env_id: str, steps: int | None, seed: int | None, policy: str,
                  env_kwargs: Mapping[str, Any] | None, disturbances: Sequence[str],
                  policy_options: Mapping[str, float], actuator_sensors: ActuatorSensors = (),
-                 actuator_noise: float | Mapping[str, float] = 0.0) -> None:
-        if steps < 2:
+                 actuator_noise: float | Mapping[str, float] = 0.0,
+                 replay: Recording | None = None) -> None:
+        env_kwargs = dict(env_kwargs or {})
+        if replay is not None:
+            steps, env_kwargs = _replay_settings(replay, steps, policy_options, env_kwargs)
+        if steps is None or steps < 2:
             raise ValueError(f"steps={steps!r} is invalid: a recording needs at least 2 steps")
         policy = canonical(policy)  # the recording names the policy by its one name
         if policy not in POLICIES:
             raise ValueError(f"unknown policy {policy!r}; choose from {', '.join(POLICIES)}")
-        self.env = gym.make(env_id, max_episode_steps=steps, **dict(env_kwargs or {}))
+        self.env = gym.make(env_id, max_episode_steps=steps, **env_kwargs)
         system = self.system = self.env.unwrapped.system
         names = system.model.disturbance_names
         unknown = sorted(set(disturbances) - set(names))
@@ -78,7 +85,13 @@ class _Run:
         self._applied = [inputs.index(name) for name in self.actuators]
         self._rng = np.random.default_rng(None if seed is None else
                                           [ACTUATOR_NOISE_STREAM, seed])
-        self.policy = make_policy(policy, self.env, seed, **policy_options)
+        self.reset_options: dict[str, Any] | None = None
+        if replay is None:
+            self.policy = make_policy(policy, self.env, seed, **policy_options)
+        else:
+            self.policy = _replaying(replay, env_id, system)
+            self.reset_options = {"state": release_state(replay, system.model)}
+            policy = "replay"
         self.steps, self.seed = steps, seed
         self._recorded = [names.index(name) for name in disturbances]
         self.columns = ["time", *inputs, *(name + APPLIED for name in self.actuators),
@@ -86,7 +99,7 @@ class _Run:
         self.params = dataclasses.asdict(system.model.params)
         self.meta = {"env": env_id, "seed": seed, "policy": policy,
                      "policy_options": dict(policy_options), "dt": system.dt,
-                     "env_kwargs": dict(env_kwargs or {}), "steps_requested": steps}
+                     "env_kwargs": env_kwargs, "steps_requested": steps}
         if self.actuators:
             self.meta["actuator_noise"] = dict(zip(self.actuators, self._noise.tolist(),
                                                    strict=True))
@@ -98,7 +111,7 @@ class _Run:
         disturbances, sensor outputs: what the policy saw before it acted), until the episode
         ends; :attr:`stopped` then says why (a consumer that stops early says so itself)."""
         env = self.env
-        obs, info = env.reset(seed=self.seed)
+        obs, info = env.reset(seed=self.seed, options=self.reset_options)
         with _bar(self.steps, progress) as bar:
             for k in range(self.steps):
                 # SB3's convention: episode_start resets a stateful policy (LQR's integrators)
@@ -131,6 +144,78 @@ class _Run:
 
     def metadata(self) -> dict[str, Any]:
         return {**self.meta, "terminated": self.terminated, "stopped": self.stopped}
+
+
+# -- replaying a recording's commands ------------------------------------------------------------
+class ReplayPolicy:
+    """The commands of a recording as a policy: step ``k`` returns the ``k``-th row of
+    ``actions`` (normalised actions, one row per sample), from the first row again at an
+    episode start (SB3's ``predict`` convention)."""
+
+    def __init__(self, actions: np.ndarray) -> None:
+        self.actions, self.k = np.asarray(actions, dtype=np.float64), 0
+
+    def predict(self, obs: Any, episode_start: Any = None,
+                deterministic: bool = True) -> tuple[np.ndarray, None]:
+        if episode_start is not None and bool(np.any(episode_start)):
+            self.k = 0
+        action = self.actions[min(self.k, len(self.actions) - 1)]
+        self.k += 1
+        return action, None
+
+
+def replay_policy(recording: Recording, system: System) -> ReplayPolicy:
+    """The recorded commanded inputs (SI units) as normalised actions of ``system``: the inverse
+    of its action map (least squares through an allocation matrix). An action beyond [-1, 1]
+    (a command beyond the environment's actuator range) is clipped by the environment and
+    flagged in ``info["action_clipped"]``. (A recording's commands are finite.)
+    """
+    return ReplayPolicy(system.actuation.to_action(recording.inputs))
+
+
+def _replaying(recording: Recording, env_id: str, system: System) -> ReplayPolicy:
+    """:func:`replay_policy`, for a record of the environment's own model."""
+    if recording.model != system.model.name:
+        raise ValueError(f"the replayed record is of model {recording.model!r}; {env_id} "
+                         f"simulates {system.model.name!r}")
+    return replay_policy(recording, system)
+
+
+def release_state(recording: Recording, model: Any) -> np.ndarray:
+    """The state a replay starts from: the model's nominal state, with the record's metadata
+    ``initial_state`` (``{state: value}``, SI) where it gives one and the first sample of every
+    measured state over both."""
+    x0 = np.array(model.x0, dtype=float)
+    given = recording.meta.get("initial_state")
+    sources = [given if isinstance(given, Mapping) else {},
+               {n: recording.data[n].iloc[0] for n in recording.measured_names}]
+    for values in sources:
+        for name, value in values.items():
+            if name in model.state_names and np.isfinite(value):
+                x0[model.state_names.index(name)] = float(value)
+    return x0
+
+
+def _replay_settings(recording: Recording, steps: int | None,
+                     policy_options: Mapping[str, float],
+                     env_kwargs: dict[str, Any]) -> tuple[int, dict[str, Any]]:
+    """The steps and environment arguments of a replay: the record's length (or ``steps``,
+    no more) at the record's sample period.
+
+    :raises ValueError: policy options given, more steps than the record has, or another
+        ``dt`` than the record's sample period.
+    """
+    if policy_options:
+        raise ValueError(f"a replay plays the record's commands: no policy options "
+                         f"({', '.join(policy_options)})")
+    n = len(recording.time)
+    if steps is not None and steps > n:
+        raise ValueError(f"steps={steps} is more than the {n} samples of the replayed record")
+    dt = round(recording.dt, 9)
+    given = env_kwargs.get("dt", dt)
+    if not math.isclose(given, dt, rel_tol=1e-6):
+        raise ValueError(f"dt={given!r} is not the replayed record's sample period {dt} s")
+    return (n if steps is None else steps), {**env_kwargs, "dt": dt}
 
 
 def _actuators(chosen: ActuatorSensors, inputs: Sequence[str], env_id: str) -> tuple[str, ...]:
@@ -193,11 +278,11 @@ def _bar(total: int, show: bool) -> Iterator[Any]:
         yield bar
 
 
-def simulate(env_id: str, steps: int, seed: int | None = None, policy: str = "prbs",
+def simulate(env_id: str, steps: int | None, seed: int | None = None, policy: str = "prbs",
              env_kwargs: Mapping[str, Any] | None = None, progress: bool = False,
              disturbances: Sequence[str] = (), actuator_sensors: ActuatorSensors = (),
              actuator_noise: float | Mapping[str, float] = 0.0,
-             **policy_options: float) -> Recording:
+             replay: Recording | None = None, **policy_options: float) -> Recording:
     """Record ``steps`` steps of ``env_id`` under ``policy``: the commanded inputs and the
     sensor outputs, in SI units, with the model name, its parameters and the settings as
     metadata (``stopped`` says why the run ended: the steps reached, or the episode terminated
@@ -216,22 +301,27 @@ def simulate(env_id: str, steps: int, seed: int | None = None, policy: str = "pr
         only some vessels log an actuator's position as well.
     :param actuator_noise: the white noise of those sensors, standard deviation in the input's
         units (a number for all, or by input name); seeded by ``seed`` in a stream of its own.
+    :param replay: a recording whose commanded inputs replace the policy (:func:`replay_policy`):
+        the environment is released from the record's first sample (:func:`release_state`) at
+        the record's sample period, for ``steps`` steps (None: the record's length).
     :raises ValueError: ``steps < 2``, an unknown disturbance or input name, or a negative
-        noise, before any simulation.
+        noise; a replayed record of another model, or longer ``steps`` than it has; before any
+        simulation.
     """
     run = _Run(env_id, steps, seed, policy, env_kwargs, disturbances, policy_options,
-               actuator_sensors, actuator_noise)
+               actuator_sensors, actuator_noise, replay)
     rows = np.array(list(run.rows(progress)))
     data = pd.DataFrame(rows, columns=run.columns)
     return Recording(data, run.system.model.name, run.params, run.metadata())
 
 
-def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
+def record(path: str | Path, env_id: str, steps: int | None, seed: int | None = None,
            policy: str = "prbs", env_kwargs: Mapping[str, Any] | None = None,
            progress: bool = False, disturbances: Sequence[str] = (),
            actuator_sensors: ActuatorSensors = (),
            actuator_noise: float | Mapping[str, float] = 0.0,
-           chunk_rows: int = CHUNK_ROWS, **policy_options: float) -> Recorded:
+           chunk_rows: int = CHUNK_ROWS, replay: Recording | None = None,
+           **policy_options: float) -> Recorded:
     """:func:`simulate` into the recording file ``path`` (.csv with its sidecar, or .parquet)
     as it runs, ``chunk_rows`` rows at a time, so that memory stays bounded however long the
     run. The file appears whole at the end (:func:`~marine_envs.recording.stream_recording`).
@@ -244,8 +334,8 @@ def record(path: str | Path, env_id: str, steps: int, seed: int | None = None,
         file, if any, is left as it was.
     """
     run = _Run(env_id, steps, seed, policy, env_kwargs, disturbances, policy_options,
-               actuator_sensors, actuator_noise)
-    model = run.system.model
+               actuator_sensors, actuator_noise, replay)
+    steps, model = run.steps, run.system.model
     with _StopOnSignals() as stop, stream_recording(path, model.name, run.columns, run.params,
                                                    run.meta, chunk_rows) as out, \
             contextlib.closing(run.rows(progress)) as rows:  # closed (its bar too) on a break

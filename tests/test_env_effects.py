@@ -12,8 +12,9 @@ import pytest
 
 import marine_envs  # noqa: F401  (registers the environments)
 from estimators.diagnosis import diagnose
-from marine_envs.models.effects import Effect, read_effects
+from marine_envs.models.effects import Effect
 from marine_envs.recording import Recording
+from marine_envs.vessel import read_effects
 
 DAMPING = Effect("quadratic_damping", "p", {"c": -1.0})
 #: A lightly damped roll, so that a decay lasts long enough to show how damping grows.

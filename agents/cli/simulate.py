@@ -35,7 +35,7 @@ def arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.add_argument("--env", type=common.env_id, default="marine_envs/USV-v0",
                         help="environment id (marine_envs/USV-v0, or USV-v0)")
-    parser.add_argument("--steps", default=1000, help="number of samples (1000)",
+    parser.add_argument("--steps", help="number of samples (1000; with --replay the record's)",
                         type=common.argument_type(int, lambda v: v >= 2, "an integer >= 2"))
     parser.add_argument("--out", required=True,
                         help="output file, .csv (with a .csv.json sidecar) or .parquet (needs "
@@ -65,11 +65,16 @@ def arguments(parser: argparse.ArgumentParser) -> None:
         float, lambda v: math.isfinite(v) and v >= 0, "a finite number >= 0"), metavar="STD",
                      help="white noise of the actuator position sensors, standard deviation "
                           "in the inputs' SI units (rad, N); default 0")
+    parser.add_argument("--replay", metavar="RECORD",
+                        help="instead of --policy, the commands of RECORD (a recording of the "
+                             "environment's model) from its first sample, at its sample period: "
+                             "e.g. through a diagnosed vessel, --env-kwargs '{\"effects\": "
+                             "\"diagnosis.json\", \"waves\": false}'")
 
 
 def handle(args: argparse.Namespace) -> int:
     """Run ``marine simulate`` as ``args`` ask; the exit code."""
-    from marine_envs.recording import check_suffix, sidecar
+    from marine_envs.recording import check_suffix, read_recording, sidecar
 
     from ..simulate import record
 
@@ -84,10 +89,12 @@ def handle(args: argparse.Namespace) -> int:
     if args.actuator_noise is not None and args.actuator_sensors is None:
         raise ValueError("--actuator-noise goes with --actuator-sensors")
     actuators = _actuator_sensors(args.actuator_sensors)
-    done = record(out, args.env, args.steps, seed=args.seed, policy=args.policy,
+    replay = None if args.replay is None else read_recording(args.replay)
+    steps = args.steps if args.steps is not None or replay is not None else 1000
+    done = record(out, args.env, steps, seed=args.seed, policy=args.policy,
                   env_kwargs=env_kwargs, progress=not args.quiet, disturbances=disturbances,
                   actuator_sensors=actuators, actuator_noise=args.actuator_noise or 0.0,
-                  **options)
+                  replay=replay, **options)
     kept = f": kept {done.steps} steps in {done.path}" if done.signal is not None else ""
     print(f"marine simulate: {done.stopped}{kept}", file=sys.stderr)
     print(f"wrote {done.steps} samples ({done.seconds:.1f} s) of model {done.model!r}: inputs "

@@ -13,6 +13,7 @@ import numpy as np
 
 from marine_envs.files import write_text
 from marine_envs.models.effects import Effect
+from marine_envs.vessel import VesselDescription, read_effects
 
 from .residuals import Forcing, Residuals, Sea
 from .rollout import Rollouts
@@ -105,7 +106,9 @@ class Diagnosis:
         ``unconfirmed`` findings, the ``calibration`` and the ``noise_model`` (the coloured
         forcing: each environment channel the filter estimated, its steady part and std in
         its units, and each force equation's own, std in state units per s; correlation
-        times, s; and the sea driving several equations as one process)."""
+        times, s; and the sea driving several equations as one process); and the diagnosed
+        vessel as an environment reads it (``environment``: :meth:`environment`, or
+        ``environment_refused``: why there is none)."""
         out = {"model": self.model, "mismatch": self.mismatch, "channels": self.channels,
                "windows": self.windows, "band": self.band,
                "findings": [_finding_dict(f) for f in self.findings], "fit": self.fit}
@@ -121,6 +124,11 @@ class Diagnosis:
                     "alternatives", "non_physical", "across_classes"):
             if getattr(self, key):
                 out[key] = getattr(self, key)
+        if self.mismatch is not None:
+            try:
+                out["environment"] = self.environment().to_dict()
+            except ValueError as error:  # not a registered vehicle, a value out of range
+                out["environment_refused"] = str(error)
         if self.measured_disturbances:
             out["measured_disturbances"] = list(self.measured_disturbances)
         for key in ("warnings", "missing_samples", "record"):
@@ -131,6 +139,22 @@ class Diagnosis:
             out["noise_model"] = [_forcing_dict(f, res.model) for f in res.forcing] + (
                 [] if res.sea is None else [_sea_dict(res.sea, res.model)])
         return json.loads(json.dumps(out, default=_plain))
+
+    def environment(self) -> VesselDescription:
+        """The diagnosed vessel as an environment takes it (``effects=``, the JSON's
+        ``environment``, :mod:`marine_envs.vessel`): the parameters the diagnosis started from
+        (:attr:`params`) overridden by the calibrated ones (refitted with the findings when
+        there are findings), and the findings an environment can carry (the others in its
+        ``left_out``, with the reason).
+
+        :raises ValueError: the model is not a registered vehicle, or a calibrated value is
+            out of its parameter's range.
+        """
+        refitted = {name: q["value"] for name, q in
+                    self.calibration_quality.get("with_findings", {}).items()}
+        params = {**self.params, **self.calibration, **refitted}
+        effects = read_effects([_finding_dict(f) for f in self.findings])
+        return VesselDescription.carrying(self.model, params, effects)
 
     def to_json(self, path: str | Path | None = None) -> str:
         text = json.dumps(self.to_dict(), indent=2)

@@ -33,7 +33,7 @@ from marine_envs.models.effects import Effect
 from marine_envs.recording import Recording
 
 from .comparison import Comparison, Scored, all_rows, extend
-from .output_error import Fit, Series, Structure, fit, term_label
+from .output_error import Fit, Series, Structure, basis, fit, term_label
 from .ranges import standard_form
 from .residuals import displacements
 from .result import Finding
@@ -278,7 +278,7 @@ def _finding_label(finding: Finding, key: str) -> str:
     ``with_EFFECT``, a companion on the same state and source)."""
     if key.startswith("with_"):
         source = finding.parameters.get("source")
-        return term_label(Effect(key[5:], finding.target, {"source": source} if source else {}))
+        return term_label(basis(key[5:], finding.target, **({"source": source} if source else {})))
     return term_label(Effect(finding.effect, finding.target, finding.parameters))
 
 

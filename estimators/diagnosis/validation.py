@@ -52,10 +52,10 @@ from marine_envs.models.effects import (
     Effect,
     ModelWithEffects,
     applied_inputs,
-    read_effects,
 )
 from marine_envs.models.integrate import rk4
 from marine_envs.recording import Recording, read_recording
+from marine_envs.vessel import read_effects
 
 from .output_error import Structure, _model_bandwidth
 from .ranges import outside_range

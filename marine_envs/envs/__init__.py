@@ -7,11 +7,12 @@ from collections.abc import Mapping
 
 from . import dp_vessel, hovercraft, hydrofoil, rov, usv
 from .base import MarineEnv, MarineVectorEnv, vector_env
-from .core import Simulator, Task
+from .core import Simulator
 from .dp_vessel import DPVesselEnv, DPVesselVectorEnv
 from .hovercraft import HovercraftEnv, HovercraftVectorEnv
 from .hydrofoil import HydrofoilEnv, HydrofoilVectorEnv
 from .rov import ROVEnv, ROVVectorEnv
+from .system import Actuation, System, Task
 from .usv import USVEnv, USVVectorEnv
 
 #: Model name (``marine_envs.models.get_model``) -> the module of its environment.
@@ -31,7 +32,7 @@ def task_weights(model: str) -> tuple[Mapping[str, float], Mapping[str, float]]:
     return module.DEFAULT_STATE_WEIGHTS, module.DEFAULT_INPUT_WEIGHTS
 
 
-__all__ = ["DPVesselEnv", "DPVesselVectorEnv", "HovercraftEnv", "HovercraftVectorEnv",
-           "HydrofoilEnv", "HydrofoilVectorEnv", "MarineEnv", "MarineVectorEnv", "ROVEnv",
-           "ROVVectorEnv", "Simulator", "Task", "USVEnv", "USVVectorEnv", "task_weights",
-           "vector_env"]
+__all__ = ["Actuation", "DPVesselEnv", "DPVesselVectorEnv", "HovercraftEnv",
+           "HovercraftVectorEnv", "HydrofoilEnv", "HydrofoilVectorEnv", "MarineEnv",
+           "MarineVectorEnv", "ROVEnv", "ROVVectorEnv", "Simulator", "System", "Task", "USVEnv",
+           "USVVectorEnv", "task_weights", "vector_env"]

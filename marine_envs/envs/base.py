@@ -27,7 +27,8 @@ from numpy.typing import NDArray
 
 from .. import plausibility
 from ..compiled import first_use
-from ..models.effects import Effect, read_effects
+from ..models.effects import Effect
+from ..vessel import VesselDescription, read_vessel
 from .core import Simulator
 from .rendering import TimeSeriesRenderer
 from .system import System
@@ -40,15 +41,27 @@ RendererFactory = Callable[[], Any]
 Renderer = Callable[[Any], Any]
 
 
-#: Effects for an environment: objects, their dicts, or a diagnosis JSON's path.
-EffectsArg = Sequence[Effect | Mapping[str, Any]] | str | Path
+#: Effects for an environment: a vessel description (:mod:`marine_envs.vessel`), the path of its
+#: JSON or of a diagnosis JSON, or effects (objects or their dicts).
+EffectsArg = VesselDescription | Sequence[Effect | Mapping[str, Any]] | str | Path
 
 
-def _with_effects(sim: Simulator, effects: EffectsArg) -> Simulator:
-    """``sim`` with the physics of ``effects`` added (:meth:`Simulator.add_effects`)."""
-    found = read_effects(effects)
-    if found:
-        sim.add_effects(found)
+def _with_effects(make_simulator: Callable[..., Simulator], kwargs: Mapping[str, Any],
+                  effects: EffectsArg, environment: str) -> Simulator:
+    """The simulator of ``kwargs`` as the vessel ``effects`` describes it: its parameters under
+    those of ``kwargs["params"]``, its effects added (:meth:`Simulator.add_effects`).
+
+    :raises ValueError: a description of another vehicle than ``environment``'s (naming both),
+        or a malformed one.
+    """
+    vessel = read_vessel(effects)
+    sim = make_simulator(**kwargs)
+    vessel.check_vehicle(sim.model.name, environment)
+    if vessel.params:  # rebuilt: the parameters shape the sea coupling and the task too
+        sim = make_simulator(**{**kwargs, "params": vessel.environment_params(
+            kwargs.get("params"))})
+    if vessel.effects:
+        sim.add_effects(list(vessel.effects))
     return sim
 
 
@@ -85,9 +98,11 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     larger actions are clipped (``info["action_clipped"]``), NaN or inf raises ``ValueError``;
     ``info["action_commanded"]`` is the physical input commanded, ``info["action_applied"]``
     the one the actuators applied (they differ only under actuator effects).
-    ``effects=`` (every environment) adds physics the nominal model leaves out: catalogue
-    effects, their dicts or a diagnosis JSON's path, e.g. ``gym.make(ENV_ID,
-    effects="diagnosis.json")`` to train on the vessel as recorded.
+    ``effects=`` (every environment) makes it a described vessel: catalogue effects or their
+    dicts add physics the nominal model leaves out; a vessel description
+    (:mod:`marine_envs.vessel`) or the path of its JSON or of a diagnosis JSON sets the model's
+    parameters too (``params=`` overrides them by name) and is refused for another vehicle, e.g.
+    ``gym.make(ENV_ID, effects="diagnosis.json")`` to train on the vessel as recorded.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -100,7 +115,7 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
                  **kwargs: Any) -> None:
         _check_render_mode(render_mode, self.metadata)
         with first_use(_vehicle(type(self))):  # the model's equations, the step kernel
-            sim = _with_effects(self.make_simulator(**kwargs), effects)
+            sim = _with_effects(self.make_simulator, kwargs, effects, type(self).__name__)
             self._system = System.of(sim, _vehicle(type(self)))  # before any boat is bound
             sim.bind(1)
         plausibility.warn(plausibility.environment_arguments(self.make_simulator, kwargs), 3)
@@ -302,7 +317,7 @@ def vector_env(single: type[MarineEnv], max_episode_steps: int = 1000) -> type[M
                  render_mode: str | None = None, effects: EffectsArg = (),
                  **kwargs: Any) -> None:
         with first_use(_vehicle(single)):  # the model's equations
-            sim = _with_effects(single.make_simulator(**kwargs), effects)
+            sim = _with_effects(single.make_simulator, kwargs, effects, type(self).__name__)
         plausibility.warn(plausibility.environment_arguments(single.make_simulator, kwargs), 3)
         MarineVectorEnv.__init__(self, sim, num_envs, max_episode_steps, render_mode=render_mode,
                                  renderer=_renderer(single.renderer, sim))

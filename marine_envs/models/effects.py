@@ -37,7 +37,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -271,38 +270,6 @@ class ActuatorStream:
 
 
 # -- effects in an environment --------------------------------------------------------------------
-def read_effects(effects: Sequence[Effect | Mapping[str, Any]] | str | Any) -> list[Effect]:
-    """Effects from :class:`Effect` objects, their ``to_dict()`` forms, or the path of a
-    diagnosis JSON (its ``findings``).
-
-    :raises ValueError: a file that is not a diagnosis, or an entry that is not an effect.
-    """
-    import json
-
-    if isinstance(effects, str | Path):
-        try:
-            document = json.loads(Path(effects).read_text())
-        except (OSError, json.JSONDecodeError) as error:
-            raise ValueError(f"effects {effects}: cannot read a diagnosis JSON: {error}") from None
-        if not isinstance(document, dict) or "findings" not in document:
-            raise ValueError(f"effects {effects}: not a diagnosis JSON (no 'findings')")
-        effects = document["findings"]
-    out = []
-    for entry in effects:
-        if isinstance(entry, Effect):
-            out.append(entry)
-        elif isinstance(entry, Mapping) and {"effect", "target"} <= set(entry):
-            parameters = {k: v for k, v in entry.get("parameters", {}).items()
-                          if not k.startswith("with_")}
-            out.append(Effect(entry["effect"], entry["target"], parameters))
-            out += [Effect(k[len("with_"):], entry["target"], {"c": v})
-                    for k, v in entry.get("parameters", {}).items() if k.startswith("with_")]
-        else:
-            raise ValueError(f"effects: {entry!r} is not an Effect or "
-                             "{'effect', 'target', 'parameters'}")
-    return out
-
-
 class ModelWithEffects(VehicleModel):
     """A vehicle model with state effects added to its equations: a model of its own (same
     names, units, bounds and outputs) that an environment steps like any other (by RK4).
