@@ -192,11 +192,12 @@ def test_a_diverging_boat_is_named_and_the_step_not_taken():
     np.testing.assert_array_equal(sim._compiled.chain.noise.stream.cursor, noise)
 
 
-def test_envs_with_effects_or_a_zigzag_law_run_in_numpy_and_the_others_compiled():
+def test_envs_with_a_zigzag_law_run_in_numpy_and_the_others_compiled_effects_too():
     compiled = [gym.make(env_id).unwrapped.sim.compiled for env_id in ENVIRONMENTS]
     assert all(compiled)
-    effects = [{"effect": "linear_damping", "target": "r", "parameters": {"c": -0.1}}]
-    assert not gym.make("marine_envs/USV-v0", effects=effects).unwrapped.sim.compiled
+    effects = [{"effect": "linear_damping", "target": "r", "parameters": {"c": -0.1}},
+               {"effect": "input_delay", "target": "delta", "parameters": {"tau": 0.3}}]
+    assert gym.make("marine_envs/USV-v0", effects=effects).unwrapped.sim.compiled
     assert not gym.make("marine_envs/Hovercraft-v0", zigzag="20/20").unwrapped.sim.compiled
 
 
