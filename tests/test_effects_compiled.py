@@ -4,6 +4,7 @@ environments with effects in the step kernel, equal to the numpy implementations
 
 import copy
 import json
+import sys
 from pathlib import Path
 
 import gymnasium as gym
@@ -23,10 +24,10 @@ from marine_envs.models.effects import (
 
 REFERENCE = np.load(Path(__file__).parent / "data" / "effects_reference.npz")
 SPEC = json.loads(str(REFERENCE["spec"]))
+sys.path.insert(0, str(Path(__file__).parent / "data"))
+import make_effects_reference as recorded  # noqa: E402
 
-
-def effects(entries):
-    return [Effect(name, target, parameters) for name, target, parameters in entries]
+effects = recorded.effects
 
 
 @pytest.mark.parametrize("name", list(SPEC["state_terms"]))
@@ -64,13 +65,7 @@ def test_input_effects_equal_the_python_streams_they_replaced(dt):
         stream = ActuatorStream(usv, effects(chain), dt)
         np.testing.assert_array_equal([stream.step(c) for c in commanded],
                                       REFERENCE[f"inputs/{dt}/stream/{k}"], err_msg=str(chain))
-        batch = BatchActuators(usv, effects(chain), dt)
-        batch.bind(2)
-        rows = []
-        for j, c in enumerate(commanded):
-            if j == 100:
-                batch.reset([1])
-            rows.append(batch.step(np.stack([c, -0.5 * c])))
+        rows = recorded.batch_rows(BatchActuators(usv, effects(chain), dt), commanded)
         np.testing.assert_array_equal(rows, REFERENCE[f"inputs/{dt}/batch/{k}"], err_msg=str(chain))
 
 

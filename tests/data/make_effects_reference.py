@@ -17,7 +17,7 @@ import numpy as np
 
 import marine_envs  # noqa: F401 - registers the environments
 from marine_envs.models import get_model
-from marine_envs.models.effects import ActuatorStream, BatchActuators, Effect, ModelWithEffects
+from marine_envs.models.effects import ActuatorStream, BatchActuators, Effect
 
 #: Each model's time-invariant state terms, one of each kind (names as in the model).
 STATE_TERMS = {
@@ -57,7 +57,21 @@ def effects(entries):
     return [Effect(name, target, parameters) for name, target, parameters in entries]
 
 
+def batch_rows(batch: BatchActuators, commanded: np.ndarray) -> np.ndarray:
+    """Two boats' applied inputs for ``commanded`` and minus half of it; boat 1 reset at
+    sample 100."""
+    batch.bind(2)
+    rows = []
+    for j, c in enumerate(commanded):
+        if j == 100:
+            batch.reset([1])
+        rows.append(batch.step(np.stack([c, -0.5 * c])))
+    return np.array(rows)
+
+
 def main() -> None:
+    from marine_envs.models.effects import ModelWithEffects  # (b31a8e0's)
+
     out, rng = {}, np.random.default_rng(2024)
     for name, entries in STATE_TERMS.items():
         model = get_model(name)
@@ -78,14 +92,8 @@ def main() -> None:
         for k, chain in enumerate(chains):
             stream = ActuatorStream(usv, effects(chain), dt)
             out[f"inputs/{dt}/stream/{k}"] = np.array([stream.step(c) for c in commanded])
-            batch = BatchActuators(usv, effects(chain), dt)
-            batch.bind(2)
-            rows = []
-            for j, c in enumerate(commanded):
-                if j == 100:
-                    batch.reset([1])
-                rows.append(batch.step(np.stack([c, -0.5 * c])))
-            out[f"inputs/{dt}/batch/{k}"] = np.array(rows)
+            out[f"inputs/{dt}/batch/{k}"] = batch_rows(BatchActuators(usv, effects(chain), dt),
+                                                       commanded)
     for key, (env_id, entries, kwargs) in ENVS.items():
         env = gym.make(env_id, effects=effects(entries), **kwargs)
         obs, _ = env.reset(seed=7)
