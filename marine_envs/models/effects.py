@@ -416,8 +416,9 @@ class EffectModel(VehicleModel):
 
 
 def equations_of(model: VehicleModel) -> bool:
-    """True when ``model.rhs`` runs its compiled :attr:`~VehicleModel.equations` (so a step
-    kernel may integrate them instead)."""
+    """True when ``model.rhs`` runs its compiled
+    :attr:`~marine_envs.models.base.VehicleModel.equations` (so a step kernel may integrate
+    them instead)."""
     if model.equations is None:
         return False
     return isinstance(model, EffectModel) or type(model).rhs is VehicleModel.rhs
