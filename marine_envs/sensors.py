@@ -7,6 +7,9 @@ through a chain of small stages, each configured per channel and vectorised over
     -> sample and hold (sensors slower than the control loop) -> delay -> dropout (hold)
 
 Every stage works on a batch of independent sensor suites (one per boat of a vector environment).
+A standard stage keeps its configuration and its per-boat state; its arithmetic is the compiled
+chain's (:func:`~marine_envs.sensor_chain.measure_chain`, with that stage alone), the very code
+the environments' step kernel runs for the whole chain.
 Randomness comes from each boat's own ``np.random.Generator`` (handed down from
 ``reset(seed=...)``) and is drawn in blocks, so a batch of boats consumes exactly the random
 streams that the same boats would consume one by one: a batched environment equals N single ones.
@@ -23,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .blocks import BLOCK, BlockStream
-from .compiled import jit
+from .sensor_chain import RELATIVE, ZOOM, measure_chain
 
 FloatArray = NDArray[np.float64]
 
@@ -71,7 +74,28 @@ def as_index(idx: NDArray[np.intp]) -> slice | NDArray[np.intp]:
     return idx
 
 
-class _RandomStage(Stage):
+class _ChainStage(Stage):
+    """A stage of the standard chain: its configuration and state here, its arithmetic the
+    compiled chain's with this stage alone (made for the batch and width at the first call
+    after :meth:`bind`). After each call :attr:`valid` tells which channels carry a fresh
+    sample (all, but for sample-and-hold and dropout)."""
+
+    _chain: CompiledChain | None = None
+
+    def bind(self, batch_size: int) -> None:
+        self._chain = None
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        chain = self._chain
+        if chain is None or chain.valid.shape != z.shape:
+            chain = self._chain = CompiledChain(SensorSuite(tuple(map(str, range(z.shape[1]))),
+                                                            [self]))
+            chain.bind(z.shape[0])
+        y, self.valid = chain.measure(z)
+        return y
+
+
+class _RandomStage(_ChainStage):
     """A stage driven by per-boat random numbers, drawn a block at a time from each boat's
     generator so that a boat's draws never depend on the other boats of the batch."""
 
@@ -90,6 +114,7 @@ class _RandomStage(Stage):
         return blocks
 
     def bind(self, batch_size: int) -> None:
+        super().bind(batch_size)
         self.stream.bind(batch_size)
         self._rngs: list[np.random.Generator] = [np.random.default_rng(0)] * batch_size
 
@@ -99,15 +124,11 @@ class _RandomStage(Stage):
         self.stream.restart(idx)
 
 
-class Bias(Stage):
+class Bias(_ChainStage):
     """Constant additive bias per channel (channel units)."""
 
     def __init__(self, bias: ArrayLike) -> None:
         self.bias = np.asarray(bias, dtype=float)
-
-    def __call__(self, z: FloatArray) -> FloatArray:
-        z += self.bias
-        return z
 
 
 class GaussianNoise(_RandomStage):
@@ -123,21 +144,12 @@ class GaussianNoise(_RandomStage):
         rng.standard_normal(out=out)
         out *= self.std  # scaled as drawn, so a step costs one addition
 
-    def __call__(self, z: FloatArray) -> FloatArray:
-        z += self.stream.next()
-        return z
 
-
-class WrapAngle(Stage):
+class WrapAngle(_ChainStage):
     """Wrap the selected channels to ``(-pi, pi]`` (a compass reads heading modulo a turn)."""
 
     def __init__(self, mask: ArrayLike) -> None:
         self.idx = as_index(np.flatnonzero(np.asarray(mask, dtype=bool)))
-
-    def __call__(self, z: FloatArray) -> FloatArray:
-        # pi - ((pi - a) mod 2 pi) lies in (-pi, pi]
-        z[:, self.idx] = math.pi - (math.pi - z[:, self.idx]) % (2 * math.pi)
-        return z
 
 
 def quantize(z: ArrayLike, mu: ArrayLike) -> FloatArray:
@@ -145,7 +157,7 @@ def quantize(z: ArrayLike, mu: ArrayLike) -> FloatArray:
     return mu * np.rint(np.divide(z, mu))
 
 
-class Quantizer(Stage):
+class Quantizer(_ChainStage):
     """Static uniform quantizer ``mu*round(z/mu)`` on the channels whose step ``mu`` is not NaN."""
 
     def __init__(self, step: ArrayLike) -> None:
@@ -156,16 +168,9 @@ class Quantizer(Stage):
                              "> 0 (use None for an unquantized channel)")
         # mu shaped (1, channels): equal-rank operands broadcast faster
         self.idx, self.mu = as_index(np.flatnonzero(active)), step[active][None, :]
-        self.every_channel = bool(active.all())
-
-    def __call__(self, z: FloatArray) -> FloatArray:
-        if self.every_channel:
-            return quantize(z, self.mu)
-        z[:, self.idx] = quantize(z[:, self.idx], self.mu)
-        return z
 
 
-class ZoomingQuantizer(Stage):
+class ZoomingQuantizer(_ChainStage):
     """Dynamic ("zooming") uniform quantizer of the USV observer patent, one zoom variable per
     channel group.
 
@@ -193,37 +198,15 @@ class ZoomingQuantizer(Stage):
         self.levels, self.zoom_in, self.margin = levels, zoom_in, margin
 
     def bind(self, batch_size: int) -> None:
+        super().bind(batch_size)
         #: Current zoom variable per boat and group (the side information to transmit).
         self.mu = np.full((batch_size, len(self.groups)), self.mu0)
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         self.mu[idx] = self.mu0
 
-    def __call__(self, z: FloatArray) -> FloatArray:
-        for g, group in enumerate(self.groups):
-            zg = z[:, group]
-            if self.law == "relative":
-                norm = np.linalg.norm(zg, axis=1, keepdims=True)
-                mu = 2 * self.k * norm / math.sqrt(group.size)
-                self.mu[:, g] = mu[:, 0]
-                safe = np.where(mu > 1e-12 * (1 + norm), mu, 1.0)
-                z[:, group] = np.where(mu > 1e-12 * (1 + norm), quantize(zg, safe), 0.0)
-            else:
-                z[:, group] = self._zoom_step(zg, g)
-        return z
 
-    def _zoom_step(self, zg: FloatArray, g: int) -> FloatArray:
-        mu = self.mu[:, g:g + 1]
-        index = np.round(zg / mu)
-        saturated = np.abs(index).max(axis=1) > self.levels
-        q = mu * np.clip(index, -self.levels, self.levels)
-        inside = np.abs(zg).max(axis=1) <= self.margin * self.levels * mu[:, 0]
-        self.mu[:, g] = np.where(saturated, mu[:, 0] / self.zoom_in,
-                                 np.where(inside, mu[:, 0] * self.zoom_in, mu[:, 0]))
-        return q
-
-
-class Saturation(Stage):
+class Saturation(_ChainStage):
     """Full-scale range of each channel: outputs are clamped to ``[-limit, limit]``."""
 
     def __init__(self, limit: ArrayLike) -> None:
@@ -232,11 +215,8 @@ class Saturation(Stage):
             raise ValueError(f"range={limit.tolist()} is invalid: full scales must be > 0")
         self.high, self.low = limit[None, :], -limit[None, :]
 
-    def __call__(self, z: FloatArray) -> FloatArray:
-        return np.minimum(np.maximum(z, self.low), self.high)
 
-
-class Delay(Stage):
+class Delay(_ChainStage):
     """Transport delay of a whole number of samples per channel (0 = none).
 
     Right after a reset the delayed channels repeat the first measurement.
@@ -248,29 +228,19 @@ class Delay(Stage):
             raise ValueError(f"delay={samples.tolist()} is invalid: whole samples >= 0 needed")
         self.samples = samples.astype(np.intp)
         self.length = int(self.samples.max()) + 1
-        self._channels = np.arange(self.samples.size)
 
     def bind(self, batch_size: int) -> None:
+        super().bind(batch_size)
         self.buf = np.zeros((batch_size, self.length, self.samples.size))
         #: each boat's slot written last (per boat: a boat may be measured alone)
         self.head = np.zeros(batch_size, dtype=np.int64)
         self.fresh = np.ones(batch_size, dtype=bool)
-        self._rows = np.arange(batch_size)
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         self.fresh[idx] = True
 
-    def __call__(self, z: FloatArray) -> FloatArray:
-        self.head = (self.head + 1) % self.length
-        if self.fresh.any():
-            self.buf[self.fresh] = z[self.fresh, None, :]
-            self.fresh[:] = False
-        self.buf[self._rows, self.head] = z
-        slots = (self.head[:, None] - self.samples[None, :]) % self.length
-        return self.buf[self._rows[:, None], slots, self._channels[None, :]]
 
-
-class SampleHold(Stage):
+class SampleHold(_ChainStage):
     """A sensor slower than the control loop: channel c is sampled every ``period[c]`` control
     steps (from the first step of an episode) and held in between.
 
@@ -285,19 +255,13 @@ class SampleHold(Stage):
         self.period = period.astype(np.int64)[None, :]
 
     def bind(self, batch_size: int) -> None:
+        super().bind(batch_size)
         self.count = np.zeros((batch_size, 1), dtype=np.int64)
         self.last = np.zeros((batch_size, self.period.size))
         self.valid = np.ones((batch_size, self.period.size), dtype=bool)
-        self._one = np.ones((1, 1), dtype=np.int64)
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         self.count[idx] = 0
-
-    def __call__(self, z: FloatArray) -> FloatArray:
-        self.valid = self.count % self.period == 0
-        self.count = self.count + self._one
-        self.last = np.where(self.valid, z, self.last)
-        return self.last
 
 
 class Dropout(_RandomStage):
@@ -323,14 +287,7 @@ class Dropout(_RandomStage):
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator]) -> None:
         super().reset(idx, rngs)
-        self.fresh[idx] = True
-
-    def __call__(self, z: FloatArray) -> FloatArray:
-        # The first sample of an episode always arrives: there is nothing to hold yet.
-        self.valid = (self.stream.next() >= self.prob) | self.fresh[:, None]
-        self.fresh[:] = False
-        self.last = np.where(self.valid, z, self.last)
-        return self.last
+        self.fresh[idx] = True  # the first sample of an episode always arrives
 
 
 class SensorSuite:
@@ -444,8 +401,8 @@ class SensorSuite:
 #: The stage types :func:`measure_chain` runs, in the order of :meth:`SensorSuite.standard`.
 CHAIN_ORDER = (Bias, GaussianNoise, WrapAngle, (Quantizer, ZoomingQuantizer), Saturation,
                SampleHold, Delay, Dropout)
-#: Zooming laws, as :func:`measure_chain` reads them.
-RELATIVE, ZOOM = 0, 1
+STANDARD = (Bias, GaussianNoise, WrapAngle, Quantizer, ZoomingQuantizer, Saturation, SampleHold,
+            Delay, Dropout)
 
 
 class CompiledChain:
@@ -457,7 +414,8 @@ class CompiledChain:
 
     def __init__(self, suite: SensorSuite) -> None:
         m = len(suite.channels)
-        found = {type(s): s for s in suite.stages}
+        # by standard kind: a stage of a subclass measures as its kind (run alone, as a stage)
+        found = {kind: s for s in suite.stages for kind in STANDARD if isinstance(s, kind)}
         self.suite = suite
         self.bias = found[Bias].bias.copy() if Bias in found else np.zeros(m)
         self.noise = found.get(GaussianNoise)
@@ -550,101 +508,3 @@ class CompiledChain:
         self.end()
         self.valid = valid
         return y, valid
-
-
-@jit(inline="never")  # once per measurement: compiled once, not into every caller
-def measure_chain(boats, z, bias, wrap, mu, group, zoom_settings, limit, period, lag, prob,
-                  noisy, zooming, holding, delaying, dropping,
-                  noise_rows, noise_cursor, zoom_mu, count, held, buf, head, delay_fresh,
-                  dropout_rows, dropout_cursor, kept, dropout_fresh, y, valid):
-    """The standard chain (:meth:`SensorSuite.standard`, module docstring) of boats ``boats``
-    (row r of the true values ``z`` is boat ``boats[r]``'s), boat by boat: measurements to ``y``,
-    fresh samples to ``valid`` (rows as ``z``); only those boats' sensors advance. Row
-    ``cursor[b]`` of a random stream is boat b's current draw; the cursors advance by one."""
-    m = z.shape[1]
-    for r in range(boats.size):
-        b = boats[r]
-        row = y[r]
-        for c in range(m):
-            a = z[r, c] + bias[c]
-            if noisy:
-                a += noise_rows[noise_cursor[b], c]
-            if wrap[c]:  # pi - ((pi - a) mod 2 pi) lies in (-pi, pi]
-                a = math.pi - (math.pi - a) % (2 * math.pi)
-            if not np.isnan(mu[c]):
-                a = mu[c] * np.rint(a / mu[c])
-            row[c] = a
-        if zooming:
-            _zoom(row, group, zoom_settings, zoom_mu[b])
-        for c in range(m):
-            a = row[c]
-            if a < -limit[c]:
-                a = -limit[c]
-            elif a > limit[c]:
-                a = limit[c]
-            fresh = True
-            if holding:
-                fresh = count[b] % period[c] == 0
-                if fresh:
-                    held[b, c] = a
-                a = held[b, c]
-            row[c] = a
-            valid[r, c] = fresh
-        if holding:
-            count[b] += 1
-        if noisy:
-            noise_cursor[b] += 1
-        if delaying:
-            length = buf.shape[1]
-            head[b] = (head[b] + 1) % length
-            for c in range(m):
-                if delay_fresh[b]:  # the line starts full of the first measurement
-                    for slot in range(length):
-                        buf[b, slot, c] = row[c]
-                buf[b, head[b], c] = row[c]
-            delay_fresh[b] = False
-            for c in range(m):
-                row[c] = buf[b, (head[b] - lag[c]) % length, c]
-        if dropping:
-            for c in range(m):
-                arrived = dropout_rows[dropout_cursor[b], c] >= prob[c] or dropout_fresh[b]
-                if arrived:
-                    kept[b, c] = row[c]
-                row[c] = kept[b, c]
-                valid[r, c] = valid[r, c] and arrived
-            dropout_fresh[b] = False
-            dropout_cursor[b] += 1
-
-
-@jit
-def _zoom(row, group, settings, mu):
-    """The zooming quantizer (:class:`ZoomingQuantizer`) on one boat's channels ``row``, in
-    place; ``mu`` is the boat's zoom variable per group (updated)."""
-    law, k, levels, zoom_in, margin = settings[0], settings[1], settings[2], settings[3], \
-        settings[4]
-    for g in range(mu.size):
-        size, norm, peak, index_peak = 0, 0.0, 0.0, 0.0
-        for c in range(row.size):
-            if group[c] == g:
-                size += 1
-                norm += row[c] * row[c]
-                peak = max(peak, abs(row[c]))
-                if law == ZOOM:
-                    index_peak = max(index_peak, abs(np.rint(row[c] / mu[g])))
-        norm = math.sqrt(norm)
-        if law == RELATIVE:
-            step = 2 * k * norm / math.sqrt(size)
-            mu[g] = step
-            usable = step > 1e-12 * (1 + norm)
-            for c in range(row.size):
-                if group[c] == g:
-                    row[c] = step * np.rint(row[c] / step) if usable else 0.0
-        else:
-            step = mu[g]
-            for c in range(row.size):
-                if group[c] == g:
-                    row[c] = step * min(max(np.rint(row[c] / step), -levels), levels)
-            if index_peak > levels:
-                mu[g] = step / zoom_in
-            elif peak <= margin * levels * step:
-                mu[g] = step * zoom_in

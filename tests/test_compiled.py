@@ -16,13 +16,7 @@ import pytest
 import marine_envs  # noqa: F401 - registers the environments
 from marine_envs import ENVIRONMENTS
 from marine_envs.models import get_model
-from marine_envs.sensors import (
-    CompiledChain,
-    GaussianNoise,
-    Saturation,
-    SensorSuite,
-    ZoomingQuantizer,
-)
+from marine_envs.sensors import CompiledChain, GaussianNoise, Saturation, SensorSuite
 
 #: The numpy right-hand sides the compiled equations replaced, evaluated on random states,
 #: inputs and disturbances before they were removed (commit 58fb721).
@@ -192,51 +186,47 @@ def test_a_diverging_boat_is_named_and_the_step_not_taken():
     np.testing.assert_array_equal(sim._compiled.chain.noise.stream.cursor, noise)
 
 
-def test_envs_with_effects_or_a_zigzag_law_run_in_numpy_and_the_others_compiled():
+def test_envs_with_a_zigzag_law_run_in_numpy_and_the_others_compiled_effects_too():
     compiled = [gym.make(env_id).unwrapped.sim.compiled for env_id in ENVIRONMENTS]
     assert all(compiled)
-    effects = [{"effect": "linear_damping", "target": "r", "parameters": {"c": -0.1}}]
-    assert not gym.make("marine_envs/USV-v0", effects=effects).unwrapped.sim.compiled
+    effects = [{"effect": "linear_damping", "target": "r", "parameters": {"c": -0.1}},
+               {"effect": "input_delay", "target": "delta", "parameters": {"tau": 0.3}}]
+    assert gym.make("marine_envs/USV-v0", effects=effects).unwrapped.sim.compiled
     assert not gym.make("marine_envs/Hovercraft-v0", zigzag="20/20").unwrapped.sim.compiled
 
 
-# -- the compiled sensor chain against the numpy stages ------------------------------------------
-CHAINS = [dict(noise_std=0.1),
-          dict(noise_std={"a": 0.1}, quantization=0.05, wrap=("b",), sensor_range=2.0),
-          dict(bias=0.3, noise_std=0.2, sample_period={"a": 3, "c": 2}, delay={"b": 2, "c": 5},
-               dropout=0.3),
-          dict(noise_std=0.05, quantization={"a": 0.1, "c": 0.2}, quantizer="zooming"),
-          dict(dropout={"a": 0.5}, delay=1, sensor_range={"c": 1.0}), {}]
+# -- the compiled sensor chain against the numpy stages it replaced --------------------------------
+#: Chains measured stage by stage by the numpy stages (tests/data/make_sensor_reference.py).
+SENSOR_REFERENCE = np.load(Path(__file__).parent / "data" / "sensor_reference.npz")
+sys.path.insert(0, str(Path(__file__).parent / "data"))
+import make_sensor_reference as chains  # noqa: E402
 
 
-def zoom_law_suite():
-    return SensorSuite(("a", "b", "c"), [
-        GaussianNoise([0.1, 0.1, 0.1]),
-        ZoomingQuantizer([[0, 2], [1]], law="zoom", levels=4, mu0=0.5), Saturation([3, 3, 3])])
-
-
-@pytest.mark.parametrize("make", [lambda kw=kw: SensorSuite.standard(("a", "b", "c"), **kw)
-                                  for kw in CHAINS] + [zoom_law_suite])
-def test_the_compiled_sensor_chain_equals_the_numpy_stages(make):
-    boats = 4
+@pytest.mark.parametrize("k", range(len(chains.CHAINS) + 1))
+def test_the_chain_at_once_and_stage_by_stage_equal_the_numpy_stages_it_replaced(k):
+    make = (lambda: SensorSuite.standard(chains.CHANNELS, **chains.CHAINS[k])) \
+        if k < len(chains.CHAINS) else chains.zoom_law_suite
     suite, twin = make(), make()
-    chain = CompiledChain.of(twin)
-    assert chain is not None
+    compiled = CompiledChain.of(twin)
+    assert compiled is not None
     for s in (suite, twin):
-        s.bind(boats)
-        s.reset(np.arange(boats), [np.random.default_rng(i) for i in range(boats)])
-    chain.bind(boats)
+        s.bind(chains.BOATS)
+        s.reset(np.arange(chains.BOATS), [np.random.default_rng(i) for i in range(chains.BOATS)])
+    compiled.bind(chains.BOATS)
     rng = np.random.default_rng(99)
-    for k in range(600):
-        z = rng.normal(size=(boats, 3)) * (3 if k % 50 < 25 else 0.1)
-        if k % 97 == 50:  # boats restarting midway
+    for step in range(chains.STEPS):
+        z = chains.true_values(step, rng)
+        if step % 97 == 50:  # boats restarting midway
             idx = np.array([1, 3])
             for s in (suite, twin):
-                s.reset(idx, [np.random.default_rng(1000 + k + i) for i in range(2)])
-        want = suite.measure(z.copy())
-        got, valid = chain.measure(z.copy())
-        np.testing.assert_array_equal(got, want)
-        np.testing.assert_array_equal(valid, np.broadcast_to(suite.valid, got.shape))
+                s.reset(idx, [np.random.default_rng(1000 + step + i) for i in range(2)])
+        by_stage = suite.measure(z.copy())
+        at_once, valid = compiled.measure(z.copy())
+        want, want_valid = SENSOR_REFERENCE[f"{k}/y"][step], SENSOR_REFERENCE[f"{k}/valid"][step]
+        np.testing.assert_array_equal(by_stage, want, err_msg=f"stage by stage, step {step}")
+        np.testing.assert_array_equal(at_once, want, err_msg=f"at once, step {step}")
+        np.testing.assert_array_equal(np.broadcast_to(suite.valid, want.shape), want_valid)
+        np.testing.assert_array_equal(valid, want_valid)
 
 
 def test_a_chain_of_other_stages_or_order_is_not_compiled():

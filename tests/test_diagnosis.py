@@ -16,7 +16,7 @@ from estimators.diagnosis.rollout import Rollouts
 from estimators.diagnosis.selection import Scored, encompassing, rivals
 from estimators.diagnosis.synthetic import synthesize, typical_effect
 from marine_envs.models import get_model
-from marine_envs.models.effects import Effect, ModelWithEffects
+from marine_envs.models.effects import Effect, EffectModel
 from marine_envs.recording import Recording
 
 
@@ -170,7 +170,7 @@ def test_a_smoother_that_runs_off_says_so():
     # a roll "damping" that feeds energy in: the filter's states overflow; without the check
     # the failure surfaced as a Toeplitz solver's complaint about NaNs in the innovations
     recording = synthesize("usv", [], duration=120.0, noise=0.05, seed=0)
-    unstable = ModelWithEffects(get_model("usv"), [Effect("quadratic_damping", "p", {"c": 500.0})])
+    unstable = EffectModel(get_model("usv"), [Effect("quadratic_damping", "p", {"c": 500.0})])
     with pytest.raises(SmootherDiverged, match="usv model's smoother diverged"):
         estimate(recording, unstable)
 

@@ -9,7 +9,7 @@ from estimators.diagnosis.residuals import AugmentedDynamics, Forcing, compiled_
 from estimators.diagnosis.synthetic import synthesize
 from estimators.ekf import ExtendedKalmanFilter, FilterResult, SmootherResult, rts_smooth
 from marine_envs.models import MeasuredDisturbances, get_model
-from marine_envs.models.effects import Effect, ModelWithEffects
+from marine_envs.models.effects import Effect, EffectModel
 
 
 def test_compiled_filter_dynamics_of_a_rov_with_a_logged_morph_command_and_a_current():
@@ -35,7 +35,7 @@ def test_compiled_filter_dynamics_of_a_rov_with_a_logged_morph_command_and_a_cur
 
 
 def test_a_model_without_compiled_equations_has_no_compiled_filter_dynamics():
-    model = ModelWithEffects(get_model("usv"), [Effect("current", "r", {"b": 0.01})])
+    model = EffectModel(get_model("usv"), [Effect("current", "r", {"b": 0.01})])
     assert compiled_augmented(AugmentedDynamics(model, [], [])) is None
 
 

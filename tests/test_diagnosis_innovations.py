@@ -9,7 +9,7 @@ from estimators.diagnosis.residuals import displacements, substeps_for
 from estimators.diagnosis.synthetic import synthesize
 from estimators.ekf import ExtendedKalmanFilter
 from marine_envs.models import get_model
-from marine_envs.models.effects import Effect, ModelWithEffects
+from marine_envs.models.effects import Effect, EffectModel
 
 #: (model, measured channels, process noise per step, the state a constant term is added to,
 #: its size, the agreement asked for as a share of the largest change): the USV's roll angle
@@ -21,7 +21,7 @@ CASES = [("usv", ("phi",), [1e-8, 1e-7, 1e-8, 1e-7, 1e-8], "p", 2e-4, 1e-6),
 
 
 def _run(model, recording, channels, q, target: str, b: float):
-    truth = ModelWithEffects(model, [Effect("current", target, {"b": b})])
+    truth = EffectModel(model, [Effect("current", target, {"b": b})])
     ekf = ExtendedKalmanFilter.from_model(
         truth, recording.dt, measured=channels, Q=np.diag(q),
         R=np.diag(np.full(len(channels), 1e-6)), x0=model.x0,

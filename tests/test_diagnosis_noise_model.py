@@ -26,7 +26,7 @@ from estimators.diagnosis.residuals import (
 )
 from estimators.diagnosis.synthetic import SEA, synthesize, typical_effect
 from marine_envs.models import get_model
-from marine_envs.models.effects import Effect, ModelWithEffects
+from marine_envs.models.effects import Effect, EffectModel
 from marine_envs.sea.coupling import USVWaveCoupling
 
 
@@ -290,7 +290,7 @@ def test_compiled_filter_dynamics_equal_their_numpy_reference(forcing):
 
 def test_filter_dynamics_of_a_model_without_compiled_equations_take_the_numpy_path():
     rng = np.random.default_rng(6)
-    model = ModelWithEffects(get_model("hovercraft"), [Effect("current", "r", {"b": 0.01})])
+    model = EffectModel(get_model("hovercraft"), [Effect("current", "r", {"b": 0.01})])
     f = _augmented(model)
     assert f._kernel is None
     z, u = rng.normal(size=(4, f.width)), rng.normal(size=(4, len(model.input_names)))

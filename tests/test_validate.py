@@ -20,11 +20,11 @@ from estimators.diagnosis import diagnose
 from estimators.diagnosis.validation import MODELS, read_host, validate
 from marine_envs.manoeuvres import read_turn, read_zigzag, zigzag
 from marine_envs.models import get_model
-from marine_envs.models.effects import Effect, ModelWithEffects
+from marine_envs.models.effects import Effect, EffectModel
 from marine_envs.recording import Recording, write_recording
 
 #: The "true" ship: Nomoto K = -0.1 1/s, T = 8 s with Norrbin's -3 r^3 (rad/s^2).
-TRUTH = ModelWithEffects(get_model("nomoto", K=-0.1, T=8.0),
+TRUTH = EffectModel(get_model("nomoto", K=-0.1, T=8.0),
                          [Effect("nonlinear_damping", "r", {"c": -3.0})])
 RATE = math.radians(15.0)  # rudder rate, rad/s
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from marine_envs.manoeuvres import zigzag
 from marine_envs.models import get_model
-from marine_envs.models.effects import Effect, ModelWithEffects
+from marine_envs.models.effects import Effect, EffectModel
 from marine_envs.recording import Recording
 
 #: The ship's own Nomoto parameters (the model's defaults are K = -0.08 1/s, T = 10 s).
@@ -29,7 +29,7 @@ DT, DURATION = 0.2, 80.0  # s: a 5 Hz log of 80 s per test
 
 def zigzag_test(amplitude_deg: float, seed: int) -> Recording:
     """The ``amplitude_deg``/``amplitude_deg`` zigzag test (starboard first), as recorded."""
-    ship = ModelWithEffects(get_model("nomoto", **SHIP), [HIDDEN])
+    ship = EffectModel(get_model("nomoto", **SHIP), [HIDDEN])
     a = math.radians(amplitude_deg)
     # K < 0: a positive (port) rudder turns the heading negative, hence turn_sign=-1
     run = zigzag(ship, a, a, duration=DURATION, dt=DT, turn_sign=-1, rudder_rate=RUDDER_RATE)

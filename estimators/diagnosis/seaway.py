@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 from scipy import optimize, signal
 
 from marine_envs.models import VehicleModel
-from marine_envs.models.effects import Effect, ModelWithEffects
+from marine_envs.models.effects import Effect, EffectModel
 from marine_envs.recording import Recording
 
 from . import feedback
@@ -413,7 +413,7 @@ def _resmoothed(recording: Recording, residuals: Residuals, selection: Selection
         if not _unmeasured(carried, residuals):  # the nominal smoothing follows the data there
             break
         try:
-            states = estimate(recording, ModelWithEffects(model, carried))
+            states = estimate(recording, EffectModel(model, carried))
         except ValueError:  # SmootherDiverged, or a noise model it left non-finite: a
             break           # fitted term that destabilises the model; keep the last search
         candidate = replace(residuals, x=states.x, x_std=states.x_std, error=equation_error(

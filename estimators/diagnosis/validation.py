@@ -50,8 +50,9 @@ from marine_envs.models import VehicleModel, get_model
 from marine_envs.models.effects import (
     BatchActuators,
     Effect,
-    ModelWithEffects,
+    EffectModel,
     applied_inputs,
+    time_invariant,
 )
 from marine_envs.models.integrate import rk4
 from marine_envs.recording import Recording, read_recording
@@ -112,7 +113,7 @@ def read_host(document: Mapping[str, Any] | str | Path) -> Host:
         calibrated = base.with_params(**nominal) if nominal else base
         final = calibrated.with_params(**refitted) if refitted else calibrated
         state = [e for e in effects if e.kind == "state"]
-        corrected = ModelWithEffects(final, state) if state else final
+        corrected = EffectModel(final, time_invariant(state)) if state else final
         ranged = tuple(f for f in document["findings"] if f.get("fitted_range"))
     except (AttributeError, KeyError, TypeError, ValueError) as error:
         raise ValueError(f"{where}: cannot rebuild its models: {type(error).__name__} "
@@ -131,7 +132,7 @@ def fitted_host(structure: Structure, theta: np.ndarray) -> Host:
     terms = [replace(t, parameters={**t.parameters, "b" if "b" in t.parameters else "c":
                                     float(theta[n + j])}) for j, t in enumerate(structure.terms)]
     state = [t for t in terms if t.kind == "state"]
-    corrected = ModelWithEffects(model, state) if state else model
+    corrected = EffectModel(model, time_invariant(state)) if state else model
     return Host(base.name, dict.fromkeys(MODELS, corrected), tuple(structure.inputs),
                 tuple(t for t in terms if t.kind == "output"))
 
@@ -353,7 +354,7 @@ def _disturbances(model: VehicleModel, rec: Recording) -> np.ndarray:
 def _substeps(model: VehicleModel, dt: float) -> int:
     """RK4 steps per sample: half a radian of the model's fastest mode per step at most (as
     the diagnosis's own free simulation, :class:`.output_error.Series`)."""
-    base = model.nominal if isinstance(model, ModelWithEffects) else model
+    base = model.nominal if isinstance(model, EffectModel) else model
     return max(1, math.ceil(_model_bandwidth(base, ()) * dt / 0.5))
 
 

@@ -17,11 +17,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..models import VehicleModel
-from ..models.effects import BatchActuators, Effect, ModelWithEffects
+from ..models.effects import BatchActuators, Effect, EffectModel, time_invariant
 from ..models.integrate import ExactStep, RK4Step
 from ..sea.processes import DisturbanceSource
 from ..sensors import SensorSuite, as_index, per_channel
-from .kernel import CompiledStep
+from .kernel import CompiledStep, StepPlan, all_finite
 from .system import Actuation, InitialState, Task
 
 FloatArray = NDArray[np.float64]
@@ -138,10 +138,10 @@ class Simulator:
     """Steps a batch of boats: disturbances -> dynamics -> cost -> sensors.
 
     :meth:`step` runs a control period of every boat in one compiled call
-    (:class:`~marine_envs.envs.kernel.CompiledStep`) when the model has compiled equations (or
-    is stepped exactly) and the sensors are the standard chain; else, and always through
-    :meth:`apply`, :meth:`advance` and :meth:`measure`, in numpy (effects, a zig-zag rudder
-    law, user models). Both give the same numbers.
+    (:class:`~marine_envs.envs.kernel.CompiledStep`, effects included) when the model has
+    compiled equations (or is stepped exactly) and the sensors are the standard chain; else,
+    and always through :meth:`apply`, :meth:`advance` and :meth:`measure`, in numpy (a zig-zag
+    rudder law, user models). Both give the same numbers.
 
     :param model: the vehicle model.
     :param sensors: the sensor chain over some of the model's states (by name).
@@ -179,6 +179,7 @@ class Simulator:
         self.model, self.sensors, self.task = model, sensors, task
         self.effects: tuple[Effect, ...] = ()
         self.actuators: BatchActuators | None = None
+        self.bias = np.zeros(len(sensors.channels))  # the sensor-bias effects, channel units
         self.disturbances, self.disturbance_seed = disturbances, disturbance_seed
         self.dt, self.initial_state = dt, initial_state
         self.integrate = ExactStep(model, dt) if integrator == "exact" else RK4Step(model, dt,
@@ -205,8 +206,10 @@ class Simulator:
         the equations (stepped by RK4 from then on), input effects sit between the action and
         the model, sensor biases offset the measured channels. Call before :meth:`bind`."""
         state = [e for e in effects if e.kind == "state"]
-        if state:
-            self.model = ModelWithEffects(self.model, state)
+        for effect in state:
+            effect.check(self.model)
+        if time_invariant(state):
+            self.model = EffectModel(self.model, state)
             substeps = getattr(self.integrate, "substeps", 4)
             self.integrate = RK4Step(self.model, self.dt, substeps)
         inputs = [e for e in effects if e.kind == "input"]
@@ -236,7 +239,21 @@ class Simulator:
             self.disturbances.bind(batch_size)
         if self.actuators is not None:
             self.actuators.bind(batch_size)
-        self._compiled = CompiledStep.of(self)
+        self._compiled = self._compile()
+
+    def _compile(self) -> CompiledStep | None:
+        """The compiled path of this bound simulator, or None (steps of its own, in a subclass;
+        a model or sensors the kernel does not know: :meth:`CompiledStep.of`)."""
+        own_steps = (type(self).apply, type(self).advance, type(self).measure) != \
+            (Simulator.apply, Simulator.advance, Simulator.measure)
+        if own_steps:
+            return None
+        return CompiledStep.of(StepPlan(
+            model=self.model, integrate=self.integrate, dt=self.dt, sensors=self.sensors,
+            batch_size=self.batch_size, mid=self.u_mid[0], scale=self.u_scale[0],
+            allocation=self._allocation, weights=self._weights, reference=self._reference,
+            limited=self._limited_list, low=self._low[0], high=self._high[0], steps=self.steps,
+            disturbances=self.disturbances, actuators=self.actuators, output_bias=self.bias))
 
     @property
     def u_commanded(self) -> FloatArray:
@@ -268,10 +285,28 @@ class Simulator:
         :raises FloatingPointError: a boat's state became NaN or inf.
         """
         if self._compiled is not None:
-            return self._compiled.step(self, action, measure)
+            return self._step_compiled(action, measure)
         self.apply(action)
         reward, failed = self.advance()
         return (self.measure() if measure else None), reward, failed
+
+    def _step_compiled(self, action: ArrayLike, measure: bool
+                       ) -> tuple[FloatArray | None, FloatArray, NDArray[np.bool_]]:
+        """:meth:`step` in one kernel call; the state arrays are replaced by new ones."""
+        compiled, a = self._compiled, self._actions(action)
+        d = self.d
+        if self.disturbances is not None:
+            if compiled.streamed:
+                d = np.empty(self.d.shape)  # the kernel reads the stream
+            elif all_finite(a):  # (else the kernel refuses the action: keep the source)
+                d = self.disturbances.step()
+        stepped = compiled.step(a, self.x, d, measure)
+        self.d = d
+        stepped.check()
+        self.x, self.u, self.clipped = stepped.x, stepped.u, stepped.clipped
+        if self.actuators is not None:
+            self._commanded = stepped.commanded
+        return stepped.y, stepped.reward, stepped.failed
 
     def measure_boats(self, idx: NDArray[np.intp]) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Measurements and valid channels of boats ``idx`` alone (the other boats' sensors do
@@ -309,7 +344,7 @@ class Simulator:
         self.__dict__.update(state)
         self._compiled = None
         if valid is not None:
-            self._compiled = CompiledStep.of(self)
+            self._compiled = self._compile()
             self._compiled.chain.valid = valid
 
     def reset(self, idx: NDArray[np.intp], rngs: Sequence[np.random.Generator],

@@ -42,7 +42,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..compiled import Equations
 from .base import VehicleModel
+from .effect_terms import INPUT_CODES, INPUT_PARAMETER, STATE_CODES, actuate_boats, with_terms
 
 FloatArray = NDArray[np.float64]
 
@@ -237,152 +239,138 @@ def resonator(omega: float, zeta: float, std: float, n: int, dt: float,
     return w * (std / max(float(np.std(w)), 1e-300))
 
 
-class ActuatorStream:
-    """The input effects applied one sample at a time, for closed-loop simulation: equal to
-    :func:`applied_inputs` over the whole sequence, effect after effect."""
-
-    def __init__(self, model: VehicleModel, effects: Sequence[Effect], dt: float) -> None:
-        self.model, self.dt = model, dt
-        self.effects = [e for e in effects if e.kind == "input"]
-        self.history: list[list[float]] = [[] for _ in self.effects]  # each stage's input
-        self.previous: list[float | None] = [None] * len(self.effects)  # rate limit output
-
-    def step(self, commanded: ArrayLike) -> FloatArray:
-        """The applied input ``(n_u,)`` for this sample's command."""
-        u = np.array(commanded, dtype=float)
-        for s, effect in enumerate(self.effects):
-            j = self.model.input_names.index(effect.target)
-            u0, p = float(self.model.u0[j]), effect.parameters
-            c = u[j] - u0
-            self.history[s].append(c)
-            if effect.effect == "input_delay":  # the window reaches back past the delay
-                window = np.asarray(self.history[s][-int(p["tau"] / self.dt) - 3:])
-                a = float(delayed(window, p["tau"] / self.dt)[-1])
-            elif effect.effect == "input_rate_limit":
-                prev = c if self.previous[s] is None else self.previous[s]
-                step = p["rate"] * self.dt
-                a = prev + min(max(c - prev, -step), step)
-                self.previous[s] = a
-            else:
-                a = float(applied_inputs(effect, self.model, u[None, :], self.dt)[0, j]) - u0
-            u[j] = u0 + a
-        return u
+# -- a model with effects -------------------------------------------------------------------------
+def term_table(effects: Sequence[Effect], model: VehicleModel) -> FloatArray:
+    """The state terms of ``effects`` (time-invariant ones) as the table the compiled
+    :func:`~marine_envs.models.effect_terms.add_terms` reads: per term ``code, target,
+    coefficient, n, operands...``, an operand a state index ``i`` or an input as ``-(j + 1)``;
+    then the table's length."""
+    table: list[float] = []
+    for effect in effects:
+        p, names = effect.parameters, model.state_names
+        if effect.effect == "unlisted":
+            operands = [i if kind == "state" else -(i + 1)
+                        for kind, i in factors(p["expression"], model)]
+        elif effect.effect in ("coupling", "nonlinear_restoring"):
+            operands = [names.index(p["source"])]
+        else:
+            operands = [names.index(effect.target)]
+        coefficient = p["b"] if effect.effect == "current" else p["c"]
+        table += [STATE_CODES[effect.effect], names.index(effect.target), coefficient,
+                  len(operands), *operands]
+    return np.array([*table, len(table)], dtype=float)
 
 
-# -- effects in an environment --------------------------------------------------------------------
-class ModelWithEffects(VehicleModel):
-    """A vehicle model with state effects added to its equations: a model of its own (same
-    names, units, bounds and outputs) that an environment steps like any other (by RK4).
+def input_table(effects: Sequence[Effect], model: VehicleModel, dt: float
+                ) -> tuple[np.ndarray, np.ndarray, FloatArray, FloatArray, np.ndarray]:
+    """The input effects as the compiled :func:`~marine_envs.models.effect_terms.actuate` reads
+    them: codes, input indices, nominal inputs, parameters (a delay in samples, a rate limit per
+    sample) and delay-line lengths (the samples a delay interpolates over)."""
+    kinds = np.array([INPUT_CODES[e.effect] for e in effects], dtype=np.int64)
+    inputs = np.array([model.input_names.index(e.target) for e in effects], dtype=np.int64)
+    u0 = np.array([float(model.u0[j]) for j in inputs.tolist()])
+    values = []
+    for e in effects:
+        value = e.parameters[INPUT_PARAMETER[e.effect]]
+        values.append(value / dt if e.effect == "input_delay" else
+                      value * dt if e.effect == "input_rate_limit" else value)
+    lengths = np.array([int(e.parameters["tau"] / dt) + 3 if e.effect == "input_delay" else 1
+                        for e in effects], dtype=np.int64)
+    return kinds, inputs, u0, np.array(values, dtype=float), lengths
 
-    :param model: the nominal model.  :param effects: time-invariant state effects (not
-        ``wave_frequency``, whose forcing is a process of its own, nor ``parameter_change``).
-    :raises ValueError: another kind of effect, or a target the model does not have.
+
+def time_invariant(effects: Sequence[Effect]) -> list[Effect]:
+    """``effects`` when each is a time-invariant state effect (one that enters a model's
+    equations for good: not ``wave_frequency``, whose forcing is a process of its own, nor
+    ``parameter_change``). :raises ValueError: another kind of effect, naming it."""
+    for effect in effects:
+        if effect.kind != "state" or effect.effect in ("wave_frequency", "parameter_change"):
+            raise ValueError(f"{effect.effect}: only time-invariant state effects enter "
+                             "a model's equations")
+    return list(effects)
+
+
+class EffectModel(VehicleModel):
+    """A vehicle model with catalogue effects added: a model of its own (the nominal one's
+    names, units, bounds and outputs) whose equations carry the state effects, and which knows
+    its input effects (:meth:`applied_inputs`) and sensor biases (:meth:`measure`).
+
+    With compiled nominal equations and time-invariant state terms its equations are compiled
+    too (:func:`~marine_envs.models.effect_terms.with_terms`: the nominal ones plus the terms,
+    tabled after the nominal constants), so an environment steps it in its compiled kernel and
+    :meth:`rhs` runs the same code; else :meth:`rhs` adds :func:`state_term` in numpy (with time
+    and forcing for ``parameter_change`` and ``wave_frequency``).
+
+    :param model: the nominal model.
+    :param effects: the effects; at most one per (effect, target) pair.
+    :raises ValueError: a target (or source) the model does not have.
     """
 
-    def __init__(self, model: VehicleModel, effects: Sequence[Effect]) -> None:
+    def __init__(self, model: VehicleModel, effects: Sequence[Effect] = ()) -> None:
         for effect in effects:
             effect.check(model)
-            if effect.kind != "state" or effect.effect in ("wave_frequency",
-                                                           "parameter_change"):
-                raise ValueError(f"{effect.effect}: only time-invariant state effects enter "
-                                 "a model's equations")
         super().__init__(model.params)
         self.nominal, self.effects = model, tuple(effects)
         for attr in ("name", "state_names", "input_names", "disturbance_names", "state_units",
                      "input_units", "disturbance_units", "wave_disturbances"):
             setattr(self, attr, getattr(model, attr))
-        self._rows = [model.state_names.index(e.target) for e in self.effects]
+        self.state_effects = [e for e in self.effects if e.kind == "state"]
+        self.input_effects = [e for e in self.effects if e.kind == "input"]
+        self.output_effects = [e for e in self.effects if e.kind == "output"]
+        self.equations = self._compiled_equations()
 
+    #: The nominal model (the name the diagnosis's simulations use).
+    model = property(lambda self: self.nominal)
     x0 = property(lambda self: self.nominal.x0)
     u0 = property(lambda self: self.nominal.u0)
     u_bounds = property(lambda self: self.nominal.u_bounds)
     output_names = property(lambda self: self.nominal.output_names)
     output_units = property(lambda self: self.nominal.output_units)
 
+    def _compiled_equations(self) -> Equations | None:
+        """The nominal equations plus the state terms, or None when either is numpy only."""
+        nominal = self.nominal
+        if not equations_of(nominal) or np.ndim(nominal.constants) != 1:
+            return None
+        if any(e.effect not in STATE_CODES for e in self.state_effects):
+            return None
+        return with_terms(nominal.equations) if self.state_effects else nominal.equations
+
+    def pack(self) -> FloatArray:
+        """The nominal constants, then the state terms' table (:func:`term_table`)."""
+        constants = self.nominal.constants
+        if not self.state_effects:
+            return constants
+        return np.concatenate([constants, term_table(self.state_effects, self.nominal)])
+
     def output(self, x: FloatArray) -> FloatArray:
         return self.nominal.output(x)
 
-    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None) -> FloatArray:
-        x_dot = self.nominal.rhs(x, u, d)
+    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None, t: float = 0.0,
+            forcing: Mapping[int, float] | None = None) -> FloatArray:
+        """``x_dot`` of the nominal model plus every state effect (``u`` is the applied input;
+        ``t`` the time, s; ``forcing`` maps the index in :attr:`effects` of a
+        ``wave_frequency`` effect to the current value of its narrow-band process)."""
+        if self.equations is not None:
+            return super().rhs(x, u, d)
         x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
-        for i, effect in zip(self._rows, self.effects, strict=True):
-            x_dot[..., i] += state_term(effect, self.nominal, x, u, 0.0)
+        x_dot = self.nominal.rhs(x, u, d)
+        for k, effect in enumerate(self.effects):
+            if effect.kind == "state":
+                i = self.nominal.state_names.index(effect.target)
+                w = (forcing or {}).get(k, 0.0)
+                x_dot[..., i] += state_term(effect, self.nominal, x, u, t, w)
         return x_dot
 
-    def with_params(self, **changes: float) -> ModelWithEffects:
-        return ModelWithEffects(self.nominal.with_params(**changes), self.effects)
-
-
-class BatchActuators:
-    """Input effects applied to a batch of boats one control period at a time (each boat keeps
-    its own delay line and rate-limited position); equal per boat to :class:`ActuatorStream`."""
-
-    def __init__(self, model: VehicleModel, effects: Sequence[Effect], dt: float) -> None:
-        for effect in effects:
-            effect.check(model)
-        self.model, self.dt = model, dt
-        self.effects = [e for e in effects if e.kind == "input"]
-
-    def bind(self, batch_size: int) -> None:
-        self.streams = [self._at_rest() for _ in range(batch_size)]
-
-    def reset(self, idx: Sequence[int]) -> None:
-        for i in idx:
-            self.streams[i] = self._at_rest()
-
-    def _at_rest(self) -> ActuatorStream:
-        """A stream whose actuators start at the nominal input: a rate-limited one moves from
-        there, a delay line is full of it."""
-        stream = ActuatorStream(self.model, self.effects, self.dt)
-        for s, effect in enumerate(self.effects):
-            if effect.effect == "input_rate_limit":
-                stream.previous[s] = 0.0
-            elif effect.effect == "input_delay":
-                stream.history[s] = [0.0] * (int(effect.parameters["tau"] / self.dt) + 3)
-        return stream
-
-    def step(self, commanded: FloatArray) -> FloatArray:
-        """The applied inputs ``(batch, n_u)`` for the commanded ones."""
-        return np.stack([s.step(c) for s, c in zip(self.streams, commanded, strict=True)])
-
-
-# -- a model with effects -------------------------------------------------------------------------
-class EffectModel:
-    """A vehicle model with catalogue effects added (the "true" physics of a generated record).
-
-    :param model: the nominal model.
-    :param effects: the effects; at most one per (effect, target) pair.
-    """
-
-    def __init__(self, model: VehicleModel, effects: Sequence[Effect] = ()) -> None:
-        for effect in effects:
-            effect.check(model)
-        self.model, self.effects = model, tuple(effects)
-        self.state_effects = [e for e in self.effects if e.kind == "state"]
-        self.input_effects = [e for e in self.effects if e.kind == "input"]
-        self.output_effects = [e for e in self.effects if e.kind == "output"]
+    def with_params(self, **changes: float) -> EffectModel:
+        return EffectModel(self.nominal.with_params(**changes), self.effects)
 
     def applied_inputs(self, commanded: ArrayLike, dt: float) -> FloatArray:
         """The applied input sequence ``(T, n_u)`` for a commanded one (held samples)."""
         u = np.asarray(commanded, dtype=float)
         for effect in self.input_effects:
-            u = applied_inputs(effect, self.model, u, dt)
+            u = applied_inputs(effect, self.nominal, u, dt)
         return u
-
-    def rhs(self, x: ArrayLike, u: ArrayLike, d: ArrayLike | None = None, t: float = 0.0,
-            forcing: Mapping[int, float] | None = None) -> FloatArray:
-        """``x_dot`` of the model plus every state effect (``u`` is the applied input;
-        ``forcing`` maps the index in :attr:`effects` of a ``wave_frequency`` effect to the
-        current value of its narrow-band process)."""
-        x, u = np.asarray(x, dtype=float), np.asarray(u, dtype=float)
-        x_dot = self.model.rhs(x, u, d)
-        for k, effect in enumerate(self.effects):
-            if effect.kind != "state":
-                continue
-            i = self.model.state_names.index(effect.target)
-            w = (forcing or {}).get(k, 0.0)
-            x_dot[..., i] += state_term(effect, self.model, x, u, t, w)
-        return x_dot
 
     def measure(self, outputs: FloatArray, names: Sequence[str]) -> FloatArray:
         """Outputs ``(..., len(names))`` (channels ``names``) plus every sensor bias."""
@@ -391,3 +379,64 @@ class EffectModel:
             if effect.target in names:
                 out[..., list(names).index(effect.target)] += effect.parameters["b"]
         return out
+
+
+def equations_of(model: VehicleModel) -> bool:
+    """True when ``model.rhs`` runs its compiled
+    :attr:`~marine_envs.models.base.VehicleModel.equations` (so a step kernel may integrate
+    them instead)."""
+    if model.equations is None:
+        return False
+    return isinstance(model, EffectModel) or type(model).rhs is VehicleModel.rhs
+
+
+class BatchActuators:
+    """Input effects applied to a batch of boats one control period at a time, each boat with
+    its own delay lines and rate-limited positions (arrays the step kernel shares); the
+    arithmetic is :func:`~marine_envs.models.effect_terms.actuate`.
+
+    :param at_rest: a boat starts with its actuators at the nominal input (a rate-limited one
+        moves from there, a delay line is full of it); else at its first command.
+    """
+
+    def __init__(self, model: VehicleModel, effects: Sequence[Effect], dt: float,
+                 at_rest: bool = True) -> None:
+        for effect in effects:
+            effect.check(model)
+        self.model, self.dt, self.at_rest = model, dt, at_rest
+        self.effects = [e for e in effects if e.kind == "input"]
+        #: codes, inputs, nominal inputs, parameters, delay-line lengths (:func:`input_table`)
+        self.table = input_table(self.effects, model, dt)
+
+    def bind(self, batch_size: int) -> None:
+        n, length = len(self.effects), int(max(self.table[4], default=1))
+        self.line = np.zeros((batch_size, n, length))
+        self.count = np.zeros((batch_size, n), dtype=np.int64)
+        self.previous = np.zeros((batch_size, n))
+        self.boats = np.arange(batch_size, dtype=np.int64)
+        self.reset(self.boats)
+
+    def reset(self, idx: ArrayLike) -> None:
+        """Boats ``idx`` start again (in place: the step kernel holds these arrays)."""
+        self.line[idx], self.previous[idx] = 0.0, 0.0
+        self.count[idx] = self.table[4] if self.at_rest else 0
+
+    def step(self, commanded: FloatArray) -> FloatArray:
+        """The applied inputs ``(batch, n_u)`` for the commanded ones."""
+        u = np.array(commanded, dtype=float, order="C")
+        actuate_boats(*self.table, self.line, self.count, self.previous, self.boats, u)
+        return u
+
+
+class ActuatorStream:
+    """The input effects of one vehicle applied one sample at a time from its first command,
+    for closed-loop simulation (a :class:`BatchActuators` of one boat): equal to
+    :func:`applied_inputs` over the whole sequence, effect after effect."""
+
+    def __init__(self, model: VehicleModel, effects: Sequence[Effect], dt: float) -> None:
+        self.batch = BatchActuators(model, effects, dt, at_rest=False)
+        self.batch.bind(1)
+
+    def step(self, commanded: ArrayLike) -> FloatArray:
+        """The applied input ``(n_u,)`` for this sample's command."""
+        return self.batch.step(np.asarray(commanded, dtype=float)[None, :])[0]
