@@ -66,7 +66,7 @@ def synthetic_decay(seed: int, heel_deg: float = 15.0, steps: int = 900) -> Reco
     x0 = np.zeros(5)
     x0[4] = math.radians(heel_deg)
     obs, _ = env.reset(seed=seed, options={"state": x0})
-    channels = env.unwrapped.sim.sensors.channels
+    channels = env.unwrapped.system.channels
     rows = []
     for k in range(steps):
         rows.append((k * env.unwrapped.dt, 0.0, obs[channels.index("p")],

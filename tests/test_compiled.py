@@ -117,7 +117,7 @@ BUSY = {  # every stateful sensor stage, clipped actions, episodes that end
 def numpy_twin(env):
     """The same vector env, run by apply/advance/measure in numpy."""
     twin = copy.deepcopy(env)
-    twin.sim.run_in_numpy()
+    twin._sim.run_in_numpy()
     return twin
 
 
@@ -125,9 +125,9 @@ def numpy_twin(env):
 def test_the_step_kernel_equals_the_numpy_path_over_episodes_and_resets(env_id):
     env = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point",
                        max_episode_steps=170, **BUSY[env_id])
-    assert env.sim.compiled
+    assert env._sim.compiled
     reference = numpy_twin(env)
-    assert not reference.sim.compiled
+    assert not reference._sim.compiled
     rng = np.random.default_rng(7)
     results = [e.reset(seed=11) for e in (env, reference)]
     np.testing.assert_array_equal(results[0][0], results[1][0])
@@ -174,7 +174,7 @@ def test_a_diverging_boat_is_named_and_the_step_not_taken():
     env = gym.make_vec("marine_envs/Hydrofoil-v0", num_envs=3,
                        vectorization_mode="vector_entry_point")
     env.reset(seed=0)
-    sim = env.sim
+    sim = env._sim
     sim.x = sim.x.copy()
     sim.x[1, 2] = np.inf  # boat 1's heave rate
     x, steps, noise = sim.x.copy(), sim.steps.copy(), sim._compiled.chain.noise.stream.cursor.copy()
@@ -187,12 +187,12 @@ def test_a_diverging_boat_is_named_and_the_step_not_taken():
 
 
 def test_envs_with_a_zigzag_law_run_in_numpy_and_the_others_compiled_effects_too():
-    compiled = [gym.make(env_id).unwrapped.sim.compiled for env_id in ENVIRONMENTS]
+    compiled = [gym.make(env_id).unwrapped._sim.compiled for env_id in ENVIRONMENTS]
     assert all(compiled)
     effects = [{"effect": "linear_damping", "target": "r", "parameters": {"c": -0.1}},
                {"effect": "input_delay", "target": "delta", "parameters": {"tau": 0.3}}]
-    assert gym.make("marine_envs/USV-v0", effects=effects).unwrapped.sim.compiled
-    assert not gym.make("marine_envs/Hovercraft-v0", zigzag="20/20").unwrapped.sim.compiled
+    assert gym.make("marine_envs/USV-v0", effects=effects).unwrapped._sim.compiled
+    assert not gym.make("marine_envs/Hovercraft-v0", zigzag="20/20").unwrapped._sim.compiled
 
 
 # -- the compiled sensor chain against the numpy stages it replaced --------------------------------

@@ -55,7 +55,7 @@ def test_a_model_without_compiled_equations_adds_the_terms_in_numpy():
     expected[:, 3] += state_term(damping, host, x, u, 0.0)
     np.testing.assert_array_equal(model.rhs(x, u), expected)
     env = gym.make("marine_envs/USV-v0", effects=[damping])
-    assert env.unwrapped.sim.compiled  # the USV's own equations are compiled
+    assert env.unwrapped._sim.compiled  # the USV's own equations are compiled
 
 
 @pytest.mark.parametrize("dt", [0.1, 0.05])
@@ -75,7 +75,7 @@ def test_a_diagnosed_vessel_steps_compiled_as_it_stepped_in_numpy(key):
     (resets included) is the one the numpy path recorded, bit for bit."""
     env_id, entries, kwargs = SPEC["envs"][key]
     env = gym.make(env_id, effects=effects(entries), **kwargs)
-    assert env.unwrapped.sim.compiled
+    assert env.unwrapped._sim.compiled
     env.reset(seed=7)
     for k, action in enumerate(REFERENCE[f"env/{key}/actions"]):
         obs, reward, term, trunc, info = env.step(action)
@@ -94,8 +94,8 @@ def test_the_numpy_path_of_a_diagnosed_vessel_equals_its_kernel():
     env = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point",
                        effects=effects(entries), **kwargs)
     twin = copy.deepcopy(env)
-    twin.sim.run_in_numpy()
-    assert env.sim.compiled and not twin.sim.compiled
+    twin._sim.run_in_numpy()
+    assert env._sim.compiled and not twin._sim.compiled
     for e in (env, twin):
         e.reset(seed=3)
     rng = np.random.default_rng(4)

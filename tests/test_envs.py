@@ -92,7 +92,7 @@ def test_bad_actions_raise_and_lose_nothing(env_id):
     env.reset(seed=0)
     good = np.zeros(env.action_space.shape, dtype=np.float32)
     env.step(good)
-    sim = env.unwrapped.sim
+    sim = env.unwrapped._sim
     before = sim.x.copy(), sim.u.copy(), sim.steps.copy()
     for bad in (np.nan, np.inf):
         action = good.copy()

@@ -147,8 +147,8 @@ def test_an_unpickled_environment_steps_as_the_original(env_id, vector):
     for _ in range(5):  # mid-episode: random streams, sensor buffers and step counts in use
         env.step(env.action_space.sample())
     copy = pickle.loads(pickle.dumps(env))
-    assert copy.unwrapped.sim.compiled == env.unwrapped.sim.compiled
-    np.testing.assert_array_equal(copy.unwrapped.sim.valid, env.unwrapped.sim.valid)
+    assert copy.unwrapped._sim.compiled == env.unwrapped._sim.compiled
+    np.testing.assert_array_equal(copy.unwrapped._sim.valid, env.unwrapped._sim.valid)
     for _ in range(30):
         action = env.action_space.sample()
         same_step(env.step(action), copy.step(action))

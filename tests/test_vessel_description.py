@@ -38,13 +38,13 @@ def test_a_description_round_trips_through_json_into_the_environment(tmp_path):
     assert read_vessel(json.loads(path.read_text())) == VESSEL
     env = gym.make(USV, effects=str(path), waves=False)
     assert (env.unwrapped.model.params.wn, env.unwrapped.model.params.zeta) == (0.9, 0.03)
-    assert env.unwrapped.sim.effects == VESSEL.effects
+    assert env.unwrapped.system.effects == VESSEL.effects
     # params= given to the environment overrides the description's, by name
     env = gym.make(USV, effects=VESSEL, params={"zeta": 0.05}, waves=False)
     assert (env.unwrapped.model.params.wn, env.unwrapped.model.params.zeta) == (0.9, 0.05)
     vec = gym.make_vec(USV, num_envs=2, vectorization_mode="vector_entry_point",
                        effects=str(path), waves=False)
-    assert vec.unwrapped.sim.model.params.wn == 0.9
+    assert vec.unwrapped.system.model.params.wn == 0.9
 
 
 @pytest.mark.parametrize("document, message", [
@@ -110,7 +110,7 @@ def test_an_older_diagnosis_json_loads_from_its_params_and_findings(tmp_path):
                               Effect("coupling", "p", {"source": "phi", "c": 0.087}))
     assert read_effects(str(path)) == list(vessel.effects)
     env = gym.make(USV, effects=str(path))
-    assert env.unwrapped.model.params.wn == 2.46 and len(env.unwrapped.sim.effects) == 2
+    assert env.unwrapped.model.params.wn == 2.46 and len(env.unwrapped.system.effects) == 2
     path.write_text(json.dumps({**old, "model": "rudder"}))
     with pytest.raises(ValueError, match="without an 'environment' block.*unknown vehicle "
                                          "'rudder'.*diagnose again"):
@@ -156,7 +156,7 @@ def synthetic_decay(seed: int) -> Recording:
         "usv", {"zeta": 0.02}, (Effect("quadratic_damping", "p", {"c": -1.0}),)),
                    disable_env_checker=True)
     obs, _ = env.reset(seed=seed, options={"state": np.radians([0, 0, 0, 0, 15.0])})
-    channels = env.unwrapped.sim.sensors.channels
+    channels = env.unwrapped.system.channels
     rows = []
     for k in range(900):
         rows.append((k * env.unwrapped.dt, 0.0, obs[channels.index("p")],

@@ -119,7 +119,7 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
             self._system = System.of(sim, _vehicle(type(self)))  # before any boat is bound
             sim.bind(1)
         plausibility.warn(plausibility.environment_arguments(self.make_simulator, kwargs), 3)
-        self.sim, self.render_mode = sim, render_mode
+        self._sim, self.render_mode = sim, render_mode
         self._make_renderer = _renderer(type(self).renderer, sim)
         self.metadata = {**self.metadata, "render_fps": round(1 / sim.dt)}
         self.action_space, self.observation_space = _spaces(sim)
@@ -129,7 +129,7 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     @property
     def model(self):
         """The vehicle model (physics only)."""
-        return self.sim.model
+        return self._sim.model
 
     @property
     def system(self) -> System:
@@ -141,24 +141,24 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
     def true_state(self) -> np.ndarray:
         """A copy of the boat's true state ``(n_x,)``, state units (for oracles and
         evaluation; changing it changes nothing)."""
-        return self.sim.x[0].copy()
+        return self._sim.x[0].copy()
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode. ``options={"state": x0}`` sets the initial true state (state units)."""
         super().reset(seed=seed)
-        x0 = _initial_state(self.sim, options)
+        x0 = _initial_state(self._sim, options)
         with first_use(_vehicle(type(self))):  # the disturbances' filters
-            self.sim.reset(_ONE, [self.np_random], x0=x0)
-        obs = self.sim.measure()[0].astype(np.float32)
+            self._sim.reset(_ONE, [self.np_random], x0=x0)
+        obs = self._sim.measure()[0].astype(np.float32)
         return obs, self._info()
 
     def step(self, action):
-        y, reward, failed = self.sim.step(action)
+        y, reward, failed = self._sim.step(action)
         return y[0].astype(np.float32), float(reward[0]), bool(failed[0]), False, self._info()
 
     def _info(self) -> dict[str, Any]:
         # views, not copies: the simulator replaces these arrays every step, never writes them
-        sim = self.sim
+        sim = self._sim
         return {"state": sim.x[0], "action_applied": sim.u[0],
                 "action_commanded": sim.u_commanded[0],
                 "action_clipped": bool(sim.clipped[0]),
@@ -173,7 +173,7 @@ class MarineEnv(gym.Env[np.ndarray, np.ndarray]):
             return None
         if self._renderer is None:
             self._renderer = self._make_renderer()
-        return self._renderer.draw(self.sim.x[0], self.sim.u[0], self.sim.steps[0] * self.dt)
+        return self._renderer.draw(self._sim.x[0], self._sim.u[0], self._sim.steps[0] * self.dt)
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -200,7 +200,7 @@ class MarineVectorEnv(VectorEnv):
             raise ValueError(f"max_episode_steps={max_episode_steps!r} is invalid: >= 1 or None")
         _check_render_mode(render_mode, self.metadata)
         self._make_renderer = renderer or _renderer(None, sim)
-        self.sim, self.num_envs, self.max_episode_steps = sim, int(num_envs), max_episode_steps
+        self._sim, self.num_envs, self.max_episode_steps = sim, int(num_envs), max_episode_steps
         self.render_mode, self.dt = render_mode, sim.dt
         self.single_action_space, self.single_observation_space = _spaces(sim)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -223,7 +223,7 @@ class MarineVectorEnv(VectorEnv):
     @property
     def true_state(self) -> np.ndarray:
         """A copy of every boat's true state ``(num_envs, n_x)``, state units."""
-        return self.sim.x.copy()
+        return self._sim.x.copy()
 
     def set_state(self, x: np.ndarray) -> np.ndarray:
         """Put every boat at the true state ``x`` ``(num_envs, n_x)`` (state units) within
@@ -233,11 +233,11 @@ class MarineVectorEnv(VectorEnv):
         :raises ValueError: ``x`` of another shape, or not finite (nothing changed).
         """
         x = np.asarray(x, dtype=float)
-        shape = self.sim.x.shape
+        shape = self._sim.x.shape
         if x.shape != shape or not np.isfinite(x).all():
             raise ValueError(f"state has shape {x.shape}; expected {shape}, finite")
-        self.sim.x = x.copy()
-        return self.sim.measure().astype(np.float32)
+        self._sim.x = x.copy()
+        return self._sim.measure().astype(np.float32)
 
     def reset(self, *, seed: int | list[int | None] | None = None,
               options: dict[str, Any] | None = None):
@@ -249,14 +249,14 @@ class MarineVectorEnv(VectorEnv):
             if len(seeds) != self.num_envs:
                 raise ValueError(f"seed: {len(seeds)} seeds for {self.num_envs} environments")
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        x0 = _initial_state(self.sim, options)
+        x0 = _initial_state(self._sim, options)
         with first_use(_vehicle(type(self))):  # the disturbances' filters
-            self.sim.reset(self._all, self._rngs, x0=x0)
+            self._sim.reset(self._all, self._rngs, x0=x0)
         self._done[:] = False
-        return self.sim.measure().astype(np.float32), self._info()
+        return self._sim.measure().astype(np.float32), self._info()
 
     def step(self, actions):
-        sim = self.sim
+        sim = self._sim
         restarting = self._done.any()  # boats to reset before they are measured
         y, reward, terminated = sim.step(actions, measure=not restarting)
         truncated = (sim.steps >= self.max_episode_steps) if self.max_episode_steps \
@@ -275,13 +275,13 @@ class MarineVectorEnv(VectorEnv):
         do across resets. Returns their first measurements ``(len(idx), m)`` and the valid
         channels, taken by those boats' sensors alone (:meth:`Simulator.measure_boats`)."""
         idx = np.asarray(idx, dtype=np.intp)
-        self.sim.reset(idx, [self._rngs[i] for i in idx])
+        self._sim.reset(idx, [self._rngs[i] for i in idx])
         self._done[idx] = False
-        y, valid = self.sim.measure_boats(idx)
+        y, valid = self._sim.measure_boats(idx)
         return y.astype(np.float32), valid
 
     def _info(self) -> dict[str, Any]:
-        sim, m = self.sim, self._mask
+        sim, m = self._sim, self._mask
         return {"state": sim.x, "_state": m, "action_applied": sim.u, "_action_applied": m,
                 "action_commanded": sim.u_commanded, "_action_commanded": m,
                 "action_clipped": sim.clipped, "_action_clipped": m,
@@ -296,7 +296,7 @@ class MarineVectorEnv(VectorEnv):
         if self._renderer is None:
             self._renderer = self._make_renderer()
         return tuple(self._renderer.draw(x, u, t * self.dt)
-                     for x, u, t in zip(self.sim.x, self.sim.u, self.sim.steps, strict=True))
+                     for x, u, t in zip(self._sim.x, self._sim.u, self._sim.steps, strict=True))
 
     def close_extras(self, **kwargs: Any) -> None:
         if self._renderer is not None:
