@@ -37,7 +37,7 @@ from ..sensors import CompiledChain, SensorSuite, measure_chain
 from .stages import act, cost, exceeds
 
 #: The fields of a :class:`KernelState`: the dynamics, the actuator effects
-#: (:func:`~marine_envs.models.effect_terms.input_table`, then :class:`BatchActuators`' state),
+#: (:func:`~marine_envs.models.effects.input_table`, then :class:`BatchActuators`' state),
 #: then the sensor chain's configuration and its state (:meth:`CompiledChain.configuration`,
 #: :meth:`CompiledChain.begin`).
 DYNAMICS = ("p", "h", "substeps", "mid", "scale", "allocation", "allocated", "weights",
