@@ -264,6 +264,33 @@ def rk4(core: RightHandSide) -> Callable[..., None]:
     return step
 
 
+def step_rows(step: Callable[..., None]) -> Callable[..., None]:
+    """The function ``f(X, U, D, P, h, substeps, OUT)`` applying a one-boat step ``step(x, u, d,
+    p, h, substeps, out, work)`` (:func:`rk4` of a model's equations,
+    :func:`marine_envs.models.integrate.exact_step`) to every row; ``P`` has one
+    row per boat or a single row for all."""
+    if step not in _STEP_ROWS:  # one batch form per step (compiled once per machine)
+        _STEP_ROWS[step] = _step_rows(step)
+    return _STEP_ROWS[step]
+
+
+#: The batch forms made so far, by one-boat step.
+_STEP_ROWS: dict[Callable[..., None], Callable[..., None]] = {}
+
+
+def _step_rows(step: Callable[..., None]) -> Callable[..., None]:
+    """:func:`step_rows`, made anew."""
+
+    @jit(inline="never")
+    def over_rows(X, U, D, P, h, substeps, OUT):
+        work = np.empty((3, X.shape[1] + U.shape[1] + D.shape[1]))
+        shared = P.shape[0] == 1
+        for b in range(X.shape[0]):
+            step(X[b], U[b], D[b], P[0] if shared else P[b], h, substeps, OUT[b], work)
+
+    return over_rows
+
+
 class Equations:
     """One boat's equations ``core(x, u, d, p, out)`` and the functions generated from them.
 

@@ -2,7 +2,6 @@
 kernel and the compiled sensor chain equal to their numpy references, and a disk cache that
 survives processes and follows edits across files."""
 
-import copy
 import os
 import subprocess
 import sys
@@ -100,53 +99,48 @@ def test_the_hydrofoil_trim_is_the_numpy_one(case):
           REFERENCE[f"{case}/trim"])
 
 
-# -- the step kernel against the numpy path ------------------------------------------------------
-BUSY = {  # every stateful sensor stage, clipped actions, episodes that end
-    "marine_envs/USV-v0": {"dropout": {"psi": 0.2}, "delay": {"r": 2}, "sample_period": {"p": 3},
-                           "bias": {"phi": 0.01}, "max_roll": 0.05},
-    "marine_envs/Hydrofoil-v0": {"dropout": {"theta": 0.2}, "delay": {"xi": 2},
-                                 "sample_period": {"xi_dot": 3}, "sensor_range": {"xi": 1.5}},
-    "marine_envs/ROV-v0": {"dropout": {"z": 0.2}, "delay": {"psi": 1}, "morph_time": 2.0},
-    "marine_envs/DPVessel-v0": {"dropout": {"north": 0.3}, "delay": {"psi": 2},
-                                "sample_period": {"east": 2}},
-    "marine_envs/Hovercraft-v0": {"dropout": {"v": 0.2}, "sample_period": {"u": 2},
-                                  "quantization": {"r": 1e-3}},
-}
+# -- the step against the episodes the numpy path recorded ----------------------------------------
+#: Episodes of the numpy path when it was a second implementation of the step
+#: (tests/data/make_step_reference.py); the kernel and today's numpy path (the kernel's stages
+#: over the batch's rows) both reproduce them.
+STEP_REFERENCE = np.load(Path(__file__).parent / "data" / "step_reference.npz")
+sys.path.insert(0, str(Path(__file__).parent / "data"))
+import make_step_reference as episodes  # noqa: E402
+
+BUSY = episodes.BUSY
 
 
-def numpy_twin(env):
-    """The same vector env, run by apply/advance/measure in numpy."""
-    twin = copy.deepcopy(env)
-    twin._sim.run_in_numpy()
-    return twin
+def assert_recorded(got, prefix):
+    """``got`` (:func:`episodes.run`) equals the recorded episode, to rounding (the numpy path
+    summed the allocation, the cost and the exact step by BLAS products)."""
+    want = {key: STEP_REFERENCE[f"{prefix}/{key}"] for key in got}
+    close(got["state"], want["state"])
+    close(got["reward"][..., None], want["reward"][..., None])
+    np.testing.assert_allclose(got["obs"], want["obs"], rtol=1e-6, atol=1e-9)  # float32
+    for key in ("action_applied", "disturbance"):
+        np.testing.assert_allclose(got[key], want[key], rtol=1e-12, atol=1e-300)
+    for key in ("action_clipped", "measurement_mask", "time", "terminated", "truncated"):
+        np.testing.assert_array_equal(got[key], want[key], err_msg=key)
 
 
+@pytest.mark.parametrize("in_numpy", [False, True], ids=["kernel", "numpy"])
 @pytest.mark.parametrize("env_id", list(ENVIRONMENTS))
-def test_the_step_kernel_equals_the_numpy_path_over_episodes_and_resets(env_id):
-    env = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point",
-                       max_episode_steps=170, **BUSY[env_id])
+def test_the_step_reproduces_the_numpy_path_s_recorded_episodes_and_resets(env_id, in_numpy):
+    env = episodes.busy_env(env_id)
     assert env._sim.compiled
-    reference = numpy_twin(env)
-    assert not reference._sim.compiled
-    rng = np.random.default_rng(7)
-    results = [e.reset(seed=11) for e in (env, reference)]
-    np.testing.assert_array_equal(results[0][0], results[1][0])
-    ended = 0
-    for step in range(400):  # beyond a wave block (256 steps), with resets
-        action = rng.uniform(-1.3, 1.3, env.action_space.shape)  # some clipped
-        (obs, reward, term, trunc, info), (obs2, reward2, term2, trunc2, info2) = \
-            (e.step(action) for e in (env, reference))
-        close(info["state"], info2["state"])
-        close(reward[:, None], reward2[:, None])
-        np.testing.assert_allclose(obs, obs2, rtol=1e-6, atol=1e-9)  # float32 observations
-        for key in ("action_applied", "disturbance"):
-            np.testing.assert_allclose(info[key], info2[key], rtol=1e-12, atol=1e-300)
-        for key in ("action_clipped", "measurement_mask", "time"):
-            np.testing.assert_array_equal(info[key], info2[key], err_msg=f"{key} at {step}")
-        np.testing.assert_array_equal(term, term2)
-        np.testing.assert_array_equal(trunc, trunc2)
-        ended += int((term | trunc).sum())
-    assert ended >= 3  # resets were exercised
+    if in_numpy:
+        env = episodes.in_numpy(env)
+        assert not env._sim.compiled
+    got = episodes.run(env, episodes.SEED, episodes.busy_actions(env))
+    assert_recorded(got, env_id)
+    assert (got["terminated"] | got["truncated"]).sum() >= 3  # resets were exercised
+
+
+def test_the_zigzag_law_runs_in_numpy_as_recorded():
+    env = gym.make("marine_envs/Hovercraft-v0", zigzag=episodes.ZIGZAG)
+    assert not env.unwrapped._sim.compiled
+    actions = np.zeros((episodes.ZIGZAG_STEPS, *env.action_space.shape))
+    assert_recorded(episodes.run(env, episodes.ZIGZAG_SEED, actions), "zigzag")
 
 
 @pytest.mark.parametrize("env_id", ["marine_envs/USV-v0", "marine_envs/DPVessel-v0"])
@@ -198,7 +192,6 @@ def test_envs_with_a_zigzag_law_run_in_numpy_and_the_others_compiled_effects_too
 # -- the compiled sensor chain against the numpy stages it replaced --------------------------------
 #: Chains measured stage by stage by the numpy stages (tests/data/make_sensor_reference.py).
 SENSOR_REFERENCE = np.load(Path(__file__).parent / "data" / "sensor_reference.npz")
-sys.path.insert(0, str(Path(__file__).parent / "data"))
 import make_sensor_reference as chains  # noqa: E402
 
 

@@ -1,8 +1,8 @@
 """The effect catalogue compiled: state terms in a model's equations, input effects per boat and
 environments with effects in the step kernel, equal to the numpy implementations they replaced
-(recorded in tests/data/effects_reference.npz by make_effects_reference.py at b31a8e0)."""
+(recorded in tests/data/effects_reference.npz by make_effects_reference.py at b31a8e0, and
+the numpy path of a diagnosed vessel in step_reference.npz by make_step_reference.py)."""
 
-import copy
 import json
 import sys
 from pathlib import Path
@@ -26,6 +26,9 @@ REFERENCE = np.load(Path(__file__).parent / "data" / "effects_reference.npz")
 SPEC = json.loads(str(REFERENCE["spec"]))
 sys.path.insert(0, str(Path(__file__).parent / "data"))
 import make_effects_reference as recorded  # noqa: E402
+import make_step_reference as episodes  # noqa: E402
+
+STEPS = np.load(Path(__file__).parent / "data" / "step_reference.npz")
 
 effects = recorded.effects
 
@@ -89,23 +92,17 @@ def test_a_diagnosed_vessel_steps_compiled_as_it_stepped_in_numpy(key):
             env.reset()
 
 
-def test_the_numpy_path_of_a_diagnosed_vessel_equals_its_kernel():
-    env_id, entries, kwargs = SPEC["envs"]["usv"]
-    env = gym.make_vec(env_id, num_envs=3, vectorization_mode="vector_entry_point",
-                       effects=effects(entries), **kwargs)
-    twin = copy.deepcopy(env)
-    twin._sim.run_in_numpy()
-    assert env._sim.compiled and not twin._sim.compiled
-    for e in (env, twin):
-        e.reset(seed=3)
-    rng = np.random.default_rng(4)
-    for _ in range(200):
-        action = rng.uniform(-1.3, 1.3, env.action_space.shape)
-        (obs, reward, *_, info), (obs2, reward2, *_, info2) = (e.step(action) for e in (env, twin))
-        np.testing.assert_array_equal(obs, obs2)
-        np.testing.assert_array_equal(reward, reward2)
-        for name in ("state", "action_applied", "action_commanded"):
-            np.testing.assert_array_equal(info[name], info2[name])
+@pytest.mark.parametrize("in_numpy", [False, True], ids=["kernel", "numpy"])
+def test_a_diagnosed_vessel_steps_as_its_numpy_path_recorded_in_numpy_too(in_numpy):
+    """The numpy path of a diagnosed vessel, once a second implementation, recorded
+    (make_step_reference.py): the kernel and today's numpy path give its numbers bit for bit."""
+    env = episodes.usv_with_effects()
+    if in_numpy:
+        env = episodes.in_numpy(env)
+    assert env._sim.compiled != in_numpy
+    got = episodes.run(env, episodes.USV_SEED, episodes.usv_actions(env))
+    for name in ("obs", "reward", "state", "action_applied", "action_commanded"):
+        np.testing.assert_array_equal(got[name], STEPS[f"usv_effects/{name}"], err_msg=name)
 
 
 def test_a_vector_env_with_effects_equals_n_single_ones():

@@ -1,7 +1,10 @@
-"""What every ``marine`` command shares: the argument types, the shared options (one parent
-parser each: :data:`DEBUG`, :data:`SEED`, :data:`JSON`, :data:`FORCE`, :data:`ENV_KWARGS`,
-:data:`QUIET`), the checks of outputs and inputs before any work, and the :class:`Parser` that
-reports a mistake on one line."""
+"""What every ``marine`` command shares: argument types, options, checks before any work.
+
+The argument types; the shared options, one parent parser each (:data:`DEBUG`, :data:`SEED`,
+:data:`JSON`, :data:`FORCE`, :data:`ENV_KWARGS`, :data:`QUIET`; by destination :data:`SHARED`),
+which a command takes in its own words (:class:`Parser`'s ``option_help``); the checks of its
+outputs and inputs before any work; and the :class:`Parser` that reports a mistake on one line.
+"""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
-"""``marine envs``: list the environments with their spaces. Its parser (:func:`add_parser`) beside
-its handler (:func:`handle`)."""
+"""``marine envs``: list the environments with their spaces. Its arguments (:func:`arguments`)
+beside its handler (:func:`handle`)."""
 
 from __future__ import annotations
 

@@ -22,6 +22,7 @@ from ..models.integrate import ExactStep, RK4Step
 from ..sea.processes import DisturbanceSource
 from ..sensors import SensorSuite, as_index, per_channel
 from .kernel import CompiledStep, StepPlan, all_finite
+from .stages import RowsStep, cost_rows, limit_rows
 from .system import Actuation, InitialState, Task
 
 FloatArray = NDArray[np.float64]
@@ -140,8 +141,10 @@ class Simulator:
     :meth:`step` runs a control period of every boat in one compiled call
     (:class:`~marine_envs.envs.kernel.CompiledStep`, effects included) when the model has
     compiled equations (or is stepped exactly) and the sensors are the standard chain; else,
-    and always through :meth:`apply`, :meth:`advance` and :meth:`measure`, in numpy (a zig-zag
-    rudder law, user models). Both give the same numbers.
+    and always through :meth:`apply`, :meth:`advance` and :meth:`measure`, stage by stage over
+    the batch (a zig-zag rudder law, user models): the same compiled stages
+    (:mod:`~marine_envs.envs.stages`) run over the rows, only a user model's numpy equations
+    and sensor stages of other kinds in numpy. Both give the same numbers.
 
     :param model: the vehicle model.
     :param sensors: the sensor chain over some of the model's states (by name).
@@ -193,13 +196,13 @@ class Simulator:
         self.u_scale, self.u_mid = self.actuation.u_scale, self.actuation.u_mid
         self._allocation = self.actuation.allocation
         limited = np.flatnonzero(np.isfinite(task.low) | np.isfinite(task.high))
-        self._limited, self._limited_list = as_index(limited), limited
+        self._limited_list = limited.astype(np.int64)
         self._low, self._high = task.low[limited][None, :], task.high[limited][None, :]
         n_d = len(model.disturbance_names)
         # the reward is a weighted sum of squares of the stacked [x u d] vector
         self._weights = -task.reward_scale * np.concatenate([task.q, task.r, np.zeros(n_d)])
         reference = np.concatenate([task.x_ref, task.u_ref, np.zeros(n_d)])
-        self._reference = reference if np.any(reference) else None
+        self._reference = reference
 
     def add_effects(self, effects: Sequence[Effect]) -> None:
         """Physics the nominal model leaves out (a diagnosis's findings): state effects enter
@@ -230,8 +233,7 @@ class Simulator:
         self.x = np.tile(self.model.x0, (batch_size, 1))
         self.u = self._commanded = np.tile(self.model.u0, (batch_size, 1))
         self.d = np.zeros((batch_size, len(self.model.disturbance_names)))
-        self.clipped = self._never_clipped = np.zeros(batch_size, dtype=bool)
-        self._never_clipped.flags.writeable = False
+        self.clipped = np.zeros(batch_size, dtype=bool)
         self.steps = np.zeros(batch_size, dtype=np.int64)
         self._one = np.ones(1, dtype=np.int64)
         self.sensors.bind(batch_size)
@@ -239,6 +241,8 @@ class Simulator:
             self.disturbances.bind(batch_size)
         if self.actuators is not None:
             self.actuators.bind(batch_size)
+        # the numpy path's integration: the compiled one-boat step over the rows, where there is one
+        self._step_rows = RowsStep.of(self.model, self.integrate, self.dt)
         self._compiled = self._compile()
 
     def _compile(self) -> CompiledStep | None:
@@ -334,6 +338,7 @@ class Simulator:
         # the compiled path holds compiled objects: rebuilt on unpickling (and in deep copies)
         # from the arrays it shares with the simulator, and the valid channels it keeps
         state = self.__dict__.copy()
+        state.pop("_step_rows", None)
         compiled = state.pop("_compiled", None)
         state["_compiled_valid"] = None if compiled is None else compiled.chain.valid
         return state
@@ -343,6 +348,8 @@ class Simulator:
         valid = state.pop("_compiled_valid", None)
         self.__dict__.update(state)
         self._compiled = None
+        if hasattr(self, "batch_size"):  # bound
+            self._step_rows = RowsStep.of(self.model, self.integrate, self.dt)
         if valid is not None:
             self._compiled = self._compile()
             self._compiled.chain.valid = valid
@@ -386,20 +393,10 @@ class Simulator:
         a = self._actions(action)
         # numpy reductions have microseconds of overhead: small actions are checked in Python
         # (a sum, not a max: max() skips a NaN that is not first)
-        if a.size <= 64:
-            values = [abs(v) for v in a.ravel().tolist()]
-            total, peak = sum(values), max(values)
-        else:
-            magnitudes = np.abs(a)
-            total, peak = magnitudes.sum(), magnitudes.max()
+        total = sum(abs(v) for v in a.ravel().tolist()) if a.size <= 64 else np.abs(a).sum()
         if not math.isfinite(total):
             raise ValueError(f"action contains NaN or inf: {a.tolist()!r}")
-        if peak > 1.0:
-            self.clipped = (np.abs(a) > 1.0).any(axis=1)
-            a = np.clip(a, -1.0, 1.0)
-        else:
-            self.clipped = self._never_clipped
-        self.u = self.actuation.to_input(a)
+        self.u, self.clipped = self.actuation.act(a)
         if self.actuators is not None:
             self._commanded = self.u
             self.u = self.actuators.step(self.u)
@@ -422,18 +419,20 @@ class Simulator:
     def advance(self) -> tuple[FloatArray, NDArray[np.bool_]]:
         """One control period for every boat: returns ``(reward, failed)``.
 
-        :raises FloatingPointError: a nonlinear model's state became NaN or inf.
+        :raises FloatingPointError: a boat's state became NaN or inf (naming it).
         """
         if self.disturbances is not None:
             self.d = self.disturbances.step()
-        xud = np.concatenate([self.x, self.u, self.d], axis=1)
-        error = xud if self._reference is None else xud - self._reference
-        reward = (error * error) @ self._weights
-        self.x = self.integrate(xud)
+        x, u, d = (np.ascontiguousarray(v, dtype=float) for v in (self.x, self.u, self.d))
+        reward = np.empty(len(x))
+        cost_rows(self._weights, self._reference, x, u, d, reward)
+        if self._step_rows is None:  # a model of numpy equations
+            self.x = self.integrate(np.concatenate([x, u, d], axis=1))
+        else:
+            self.x = self._step_rows(x, u, d)
         self.steps = self.steps + self._one
-        watched = self.x[:, self._limited]
-        exceeded = (watched < self._low) | (watched > self._high)
-        failed = exceeded[:, 0] if exceeded.shape[1] == 1 else exceeded.any(axis=1)
+        failed = np.empty(len(x), dtype=bool)
+        limit_rows(self.x, self._limited_list, self._low[0], self._high[0], failed)
         return reward, failed
 
     def measure(self) -> FloatArray:

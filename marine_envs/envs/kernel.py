@@ -2,12 +2,13 @@
 
 apply (clip, scale, allocate, actuator effects) -> cost -> integrate (the model's equations and
 its effects' terms) -> limits -> sensors (sensor biases, then the chain), boat by boat, the same
-code for one boat and for a batch. It does what :meth:`Simulator.apply`, :meth:`~Simulator.advance`
-and :meth:`~Simulator.measure` do in numpy (the path of what the kernel does not know: user models
-without compiled equations, sensor chains of other stages, a simulator with steps of its own). The
-simulator hands the kernel what it needs as a :class:`StepPlan` (the kernel knows no simulator).
-Python keeps the per-boat random streams (waves, current, wind, noise), which it refills a block at
-a time, and the info dict.
+code for one boat and for a batch. Each stage is written once (:mod:`~marine_envs.envs.stages`,
+the effect terms, the sensor chain) and merged into the kernel's loop; :meth:`Simulator.apply`,
+:meth:`~Simulator.advance` and :meth:`~Simulator.measure` run the same stages over the batch's
+rows, for what the kernel does not know (user models without compiled equations, sensor chains
+of other stages, a simulator with steps of its own). The simulator hands the kernel what it
+needs as a :class:`StepPlan` (the kernel knows no simulator). Python keeps the per-boat random
+streams (waves, current, wind, noise), which it refills a block at a time, and the info dict.
 
 What does not change from step to step (constants, the sensors' state arrays, the random streams'
 rows and cursors) is held in one :class:`KernelState`, so a step passes a handful of arrays: numba
@@ -30,12 +31,13 @@ from ..compiled import compile_for, jit
 from ..models import VehicleModel
 from ..models.effect_terms import actuate
 from ..models.effects import BatchActuators, equations_of
-from ..models.integrate import ExactStep, RK4Step
+from ..models.integrate import ExactStep, RK4Step, exact_step
 from ..sea.processes import DisturbanceSource
 from ..sensors import CompiledChain, SensorSuite, measure_chain
+from .stages import act, cost, exceeds
 
 #: The fields of a :class:`KernelState`: the dynamics, the actuator effects
-#: (:func:`~marine_envs.models.effect_terms.input_table`, then :class:`BatchActuators`' state),
+#: (:func:`~marine_envs.models.effects.input_table`, then :class:`BatchActuators`' state),
 #: then the sensor chain's configuration and its state (:meth:`CompiledChain.configuration`,
 #: :meth:`CompiledChain.begin`).
 DYNAMICS = ("p", "h", "substeps", "mid", "scale", "allocation", "allocated", "weights",
@@ -79,44 +81,11 @@ def new_state(*fields):
     return KernelState(*fields)
 
 
-@jit
-def exact_step(x, u, d, p, h, substeps, out, work):
-    """The exact (zero-order-hold) step of an affine model, ``out = [x u d] @ T + c``, with
-    ``p`` = ``T`` row by row, then ``c`` (:class:`~marine_envs.models.integrate.ExactStep`);
-    ``work[0]`` holds ``[x u d]``. Each output is summed in the order of ``[x u d]``, then the
-    offset; four outputs at a time in registers (sums kept in ``out`` would wait on memory at
-    every term: it might alias ``p``)."""
-    n_x, n_u, n_d = x.size, u.size, d.size
-    n_in = n_x + n_u + n_d
-    xud = work[0]
-    for k in range(n_x):
-        xud[k] = x[k]
-    for k in range(n_u):
-        xud[n_x + k] = u[k]
-    for k in range(n_d):
-        xud[n_x + n_u + k] = d[k]
-    for i in range(0, n_x - 3, 4):
-        t0 = t1 = t2 = t3 = 0.0
-        for k in range(n_in):
-            z, row = xud[k], k * n_x + i
-            t0 += z * p[row]
-            t1 += z * p[row + 1]
-            t2 += z * p[row + 2]
-            t3 += z * p[row + 3]
-        c = n_in * n_x + i
-        out[i], out[i + 1], out[i + 2], out[i + 3] = t0 + p[c], t1 + p[c + 1], t2 + p[c + 2], \
-            t3 + p[c + 3]
-    for i in range(n_x - n_x % 4, n_x):  # the rest, one at a time
-        total = 0.0
-        for k in range(n_in):
-            total += xud[k] * p[k * n_x + i]
-        out[i] = total + p[n_in * n_x + i]
-
-
 def step_kernel(integrate: Callable[..., None]) -> Callable[..., int]:
     """The kernel ``step(state, actions, x, d, x_out, u_out, u_cmd, reward, failed, clipped,
     measure, y, valid) -> int`` of a model stepped by ``integrate(x, u, d, p, h, substeps, out,
-    work)`` (:func:`exact_step`, or :func:`marine_envs.compiled.rk4` of its equations).
+    work)`` (:func:`~marine_envs.models.integrate.exact_step`, or
+    :func:`marine_envs.compiled.rk4` of its equations).
 
     Writes the disturbances (when they come from one block stream, ``state.streamed``; else
     ``d`` holds them), the next states, the applied and the commanded inputs (the same array
@@ -149,39 +118,19 @@ def step_kernel(integrate: Callable[..., None]) -> Callable[..., int]:
         work = np.empty((3, n_x + n_u + d.shape[1]))  # scratch rows of at least [x u d]
         for b in range(n_boats):
             # the actions in [-1, 1] command the actuators over their ranges
-            clip = False
-            for j in range(n_a):
-                a = actions[b, j]
-                if a > 1.0:
-                    a, clip = 1.0, True
-                elif a < -1.0:
-                    a, clip = -1.0, True
-                f[j] = mid[j] + scale[j] * a
-            clipped[b] = clip
-            for i in range(n_u):
-                if allocated:
-                    total = 0.0
-                    for j in range(n_a):
-                        total += f[j] * allocation[j, i]
-                    u_cmd[b, i] = total
-                else:
-                    u_cmd[b, i] = f[i]
+            clipped[b] = act(actions[b], mid, scale, allocation, allocated, f, u_cmd[b])
             if acting:  # the commanded inputs through the actuator effects
                 for i in range(n_u):
                     u_out[b, i] = u_cmd[b, i]
                 actuate(kinds, inputs, u0, values, lengths, line, count, previous, b, u_out[b])
-            reward[b] = _reward(weights, reference, x[b], u_out[b], d[b])
+            reward[b] = cost(weights, reference, x[b], u_out[b], d[b])
             integrate(x[b], u_out[b], d[b], p, h, substeps, x_out[b], work)
             for i in range(n_x):
                 if not np.isfinite(x_out[b, i]):
                     return b
         limited, low, high, steps = st.limited, st.low, st.high, st.steps
         for b in range(n_boats):
-            exceeded = False
-            for k in range(limited.size):
-                value = x_out[b, limited[k]]
-                exceeded = exceeded or value < low[k] or value > high[k]
-            failed[b] = exceeded
+            failed[b] = exceeds(x_out[b], limited, low, high)
             steps[b] += 1
         if measure:
             refill = measure_boats(st, st.boats, x_out, y, valid) or refill
@@ -199,22 +148,6 @@ def _advance(cursor):
         cursor[b] += 1
         exhausted = exhausted or cursor[b] - b * BLOCK == BLOCK
     return exhausted
-
-
-@jit
-def _reward(w, ref, x, u, d):
-    """Minus the weighted squares of ``[x u d]`` about the reference ``ref`` (the task's cost,
-    weights ``w``)."""
-    total = 0.0
-    for k in range(x.size):
-        total += (x[k] - ref[k]) * (x[k] - ref[k]) * w[k]
-    n = x.size
-    for k in range(u.size):
-        total += (u[k] - ref[n + k]) * (u[k] - ref[n + k]) * w[n + k]
-    n += u.size
-    for k in range(d.size):
-        total += (d[k] - ref[n + k]) * (d[k] - ref[n + k]) * w[n + k]
-    return total
 
 
 @jit(inline="never")  # once per step: compiled once, not into every caller
@@ -400,11 +333,7 @@ class CompiledStep:
         sensors' arrays."""
         integrate = plan.integrate
         if isinstance(integrate, ExactStep):
-            offset = integrate.offset
-            p = np.concatenate([integrate.transition.ravel(),
-                                np.zeros(len(plan.model.state_names)) if offset is None
-                                else offset])
-            h, substeps = plan.dt, 1
+            p, h, substeps = integrate.packed, plan.dt, 1
         else:
             p, h, substeps = plan.model.constants, integrate.h, integrate.substeps
         allocation, stream, weights = plan.allocation, self.stream, plan.weights
@@ -483,5 +412,5 @@ class CompiledStep:
 
 
 __all__ = ["BAD_ACTION", "REFILL", "STEPPED", "CompiledStep", "KernelState", "StepPlan",
-           "Stepped", "all_finite", "exact_step",
+           "Stepped", "all_finite",
            "kernel_for", "measure_boats", "new_state", "output_map", "step_kernel"]

@@ -26,6 +26,7 @@ from ..models.effects import Effect
 from ..models.integrate import ExactStep
 from ..sea.processes import DisturbanceSource
 from ..sensors import SensorSuite
+from .stages import act_rows, command_rows
 
 FloatArray = NDArray[np.float64]
 #: Draws one boat's initial state (state units) from its generator.
@@ -111,9 +112,28 @@ class Actuation:
         """Model inputs (input units) of normalised actions ``a`` in [-1, 1], shape
         ``(n_actuators,)`` or ``(batch, n_actuators)`` (not clipped here)."""
         a = np.asarray(a, dtype=float)
-        f = self.u_mid + self.u_scale * a
-        u = f if self.allocation is None else f @ self.allocation
+        rows = np.array(a.reshape(-1, self.size), order="C")  # (a fresh writable C array)
+        u = np.empty((len(rows), self.n_inputs))
+        command_rows(rows, *self._map(), u)
         return u[0] if a.ndim == 1 else u
+
+    def act(self, a: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """The model inputs of actions ``a`` (batch x actuators, C-contiguous floats) clipped
+        to [-1, 1], and which boats' actions were clipped."""
+        u, clipped = np.empty((len(a), self.n_inputs)), np.empty(len(a), dtype=bool)
+        act_rows(a, *self._map(), u, clipped)
+        return u, clipped
+
+    @property
+    def n_inputs(self) -> int:
+        """Number of model inputs the actuators drive."""
+        return self.size if self.allocation is None else self.allocation.shape[1]
+
+    def _map(self) -> tuple[FloatArray, FloatArray, FloatArray, bool]:
+        """The map's arrays as :func:`~marine_envs.envs.stages.command` reads them."""
+        allocation = self.allocation
+        return (self.u_mid[0], self.u_scale[0],
+                np.zeros((1, 1)) if allocation is None else allocation, allocation is not None)
 
     def to_action(self, u: ArrayLike) -> FloatArray:
         """The normalised actions that apply inputs ``u`` (input units), shape ``(n_inputs,)``
