@@ -119,9 +119,21 @@ def test_blas_runs_on_one_thread_inside_a_benchmark_and_is_restored_after(tmp_pa
     assert seen and seen[0] and all(n == 1 for n in seen[0])
     assert _blas_threads() == before
     printed = capsys.readouterr().out
-    lines = printed[printed.index("| vehicle | case |"):].splitlines()
-    table = "\n".join(line for line in lines if line.startswith("|"))
-    assert "| USV | N=4 | CartPoleVectorEnv |" in table and table in page.read_text()
+    tables = _tables(printed[printed.index("| vehicle | case |"):])
+    assert "| USV | N=4 | CartPoleVectorEnv |" in tables[0]
+    assert all(table in page.read_text() for table in tables)  # each printed table on the page
+
+
+def _tables(text: str) -> list[str]:
+    """The markdown tables of ``text``: runs of consecutive lines that start with ``|``."""
+    tables, rows = [], []
+    for line in [*text.splitlines(), ""]:
+        if line.startswith("|"):
+            rows.append(line)
+        elif rows:
+            tables.append("\n".join(rows))
+            rows = []
+    return tables
 
 
 def test_the_results_index_lists_every_page_with_its_command_and_time(tmp_path):
