@@ -62,7 +62,7 @@ def compare(env_id: str, algo: str, estimator: str, episodes: int, out: Path,
         sb3.train(env_id, algo, estimator, timesteps, out, seed=seed, progress_bar=True)
     agent = sb3.load_agent(out)
     seeds = range(FIRST_SEED, FIRST_SEED + episodes)
-    rl = _cost(evaluation.evaluate(env_id, lambda venv: agent, estimator, seeds))
+    rl = _cost(evaluation.evaluate(env_id, agent, estimator, seeds))
     lqr = _cost(evaluation.evaluate(env_id, "lqr", lqr_estimator, seeds))
     ratio = rl[0] / lqr[0]
     return {"env": env_id.split("/")[1], "agent": algo, "estimator": estimator,

@@ -81,10 +81,9 @@ def run_cell(cell: Mapping[str, str], settings: Mapping[str, Any], out: str) -> 
                 why = path / "untrainable.txt"
                 raise ValueError("its agent could not be trained: " +
                                  (why.read_text() if why.exists() else "no model.zip"))
-            policy: Any = lambda venv: load_agent(path)  # noqa: E731
+            policy: Any = load_agent(path)  # an agent is its own factory
         elif controller.startswith("sb3:"):
-            agent = _saved_agent(controller, vehicle, estimator)
-            policy = lambda venv: agent  # noqa: E731
+            policy = _saved_agent(controller, vehicle, estimator)
         else:
             policy = controller
         system = gym.make(env_id, **sea).unwrapped.system  # its period and default sensors

@@ -59,6 +59,14 @@ def arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--backend", choices=TRAIN_BACKENDS,
                         help="native (our batched env, the default) or dummy (SB3's "
                              "DummyVecEnv)")
+    parser.add_argument("--residual", choices=("lqr",),
+                        help="learn a correction to this controller on the same estimate "
+                             "(residual RL): the action is the LQR's plus the agent's, bounded "
+                             "by --residual-scale; the untrained agent is the LQR, and a "
+                             "correction is kept only where validation scores it better")
+    parser.add_argument("--residual-scale", type=float, metavar="FRACTION",
+                        help="bound of the correction, a fraction of each action's half range "
+                             "(default 0.5; with --residual)")
     parser.add_argument("--out", metavar="DIR", help="output directory")
     parser.add_argument("--resume", metavar="DIR",
                         help="continue the run in DIR (a 'marine train --out' folder) from its "
@@ -84,19 +92,24 @@ def handle(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         if args.env_id is None or args.out is None:
             parser.error("the environment id and --out DIR are required (or --resume DIR)")
         common.check_estimator(args.estimator)
+        if args.residual_scale is not None and args.residual is None:
+            parser.error("--residual-scale needs --residual")
+        overrides = {key: value for key, value in (("residual", args.residual),
+                                                   ("residual_scale", args.residual_scale))
+                     if value is not None}
         config = Path(args.config) if args.config else sb3.HYPERPARAMS
         if not config.is_file():
             raise FileNotFoundError(f"--config {config}: no such file")
         sb3.settings(args.env_id, args.algo or "ppo", args.estimator, args.timesteps,
-                     args.seed or 0, args.n_envs, args.backend or "native",
+                     args.seed or 0, args.n_envs, args.backend or "native", overrides,
                      hyperparams_file=config)
         sb3.check_not_in_use(Path(args.out))  # a live run is named as such, --force or not
         out = common.output_dir(args.out, args.force, "--out", sb3.existing_run,
                                 " (a training run: --resume it)")
         result = sb3.train(args.env_id, args.algo or "ppo", args.estimator, args.timesteps,
                            out, args.seed or 0, args.n_envs, args.backend or "native",
-                           progress_bar=not args.quiet, hyperparams_file=config,
-                           force=args.force)
+                           progress_bar=not args.quiet, hyperparams=overrides,
+                           hyperparams_file=config, force=args.force)
     if result.stop_signal is not None:
         print(f"marine train: interrupted at {result.timesteps} steps, saved to {result.out} "
               f"(continue: marine train --resume {result.out})", file=sys.stderr)
@@ -109,6 +122,9 @@ def handle(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         print(f"model.zip is the agent of {best['timesteps']} steps, the best on validation "
               f"({best['failed']} failed, mean cost {best['cost']:.4g}); the last is "
               "last_model.zip")
+        if best["timesteps"] == 0:
+            print("no correction scored better than the controller it corrects: the agent "
+                  "is that controller (it learnt nothing to keep)")
     return 0
 
 

@@ -19,6 +19,7 @@ from estimators.registry import RAW
 
 from .. import evaluation
 from .hyperparams import _torch_threads, algorithm
+from .residual import ResidualPolicy, base_policy, residual_of
 from .runs import find_agent, read_config
 
 # -- using a trained agent ------------------------------------------------------------------
@@ -30,7 +31,12 @@ class Agent:
 
     A recurrent policy's memory is carried by the agent when the caller passes no ``state``
     (the evaluation loops, written for memoryless policies, drop it); ``episode_start`` clears
-    it, as for the LQR's integrators."""
+    it, as for the LQR's integrators.
+
+    A residual agent (its settings name a ``residual`` controller, :mod:`agents.sb3.residual`)
+    predicts only the correction: call the agent with the environment it is to act on,
+    ``agent(venv)``, for the policy that acts there (the controller plus the correction).
+    Every agent is so a policy factory, as :func:`agents.evaluation.evaluate` takes them."""
 
     model: BaseAlgorithm
     normalizer: VecNormalize | None
@@ -49,6 +55,23 @@ class Agent:
             self.memory[0].shape[1] == rows else None  # a new batch starts afresh
         action, self.memory = self.model.predict(obs, memory, episode_start, deterministic)
         return action, self.memory
+
+    def __call__(self, venv: Any) -> Any:
+        """The policy acting on the native vector env ``venv`` (seen through the agent's
+        estimator): this agent, or for a residual agent its controller on ``venv`` plus it."""
+        base, scale = residual_of(self.config.get("hyperparams", {}))
+        if base is None:
+            return self
+        estimator = self.config.get("estimator") or RAW
+        return ResidualPolicy(base_policy(base, venv, estimator), self, scale)
+
+    @property
+    def kind(self) -> str:
+        """The agent's name in tables and in the zoo: its algorithm (``ppo``), prefixed
+        ``residual_`` for a correction to a controller (``residual_ppo``)."""
+        algo = self.config.get("algo", type(self.model).__name__.lower())
+        return f"residual_{algo}" if residual_of(self.config.get("hyperparams", {}))[0] \
+            else algo
 
     @property
     def recurrent(self) -> bool:
@@ -91,7 +114,7 @@ def evaluate(out: Path, episodes: int = 5, seed: int = 0,
     agent = load_agent(out)
     config = agent.config
     with _torch_threads(torch_threads):
-        return evaluation.evaluate(config["env_id"], lambda venv: agent,
+        return evaluation.evaluate(config["env_id"], agent,
                                    config["estimator"] or RAW, range(seed, seed + episodes),
                                    max_episode_steps=config.get("max_episode_steps"),
                                    progress=progress)

@@ -4,8 +4,9 @@ checkpoints written whole, a progress bar, and a stop at the next step when aske
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
@@ -28,11 +29,17 @@ class KeepBest(BaseCallback):
 
     :param stopped: whether training was stopped early (Ctrl-C): then the end of training
         validates nothing more, so that stopping is quick.
+    :param agent_config: the run's settings (its ``config.json``), which say how the agent
+        acts (a residual agent corrects a controller).
+    :param from_start: also score the untrained agent, before any step: a residual agent's is
+        the controller it corrects, so a correction is kept only if it scores better.
     """
 
     def __init__(self, env_id: str, estimator: str, episodes: int, every: int, out: Path,
                  max_episode_steps: int | None = None,
-                 stopped: Callable[[], bool] = lambda: False) -> None:
+                 stopped: Callable[[], bool] = lambda: False,
+                 agent_config: Mapping[str, Any] | None = None,
+                 from_start: bool = False) -> None:
         if not (isinstance(episodes, int) and episodes >= 1):
             raise ValueError(f"validation_episodes={episodes!r} is invalid: an integer >= 1 "
                              "(or 0 in the settings: no validation)")
@@ -40,9 +47,14 @@ class KeepBest(BaseCallback):
         self.env_id, self.estimator, self.episodes = env_id, estimator, episodes
         self.every, self.out, self.max_episode_steps = every, out, max_episode_steps
         self.stopped = stopped
+        self.agent_config, self.from_start = dict(agent_config or {}), from_start
         #: one entry per validation: timesteps, failed episodes, mean cost
         self.history: list[dict[str, float]] = []
         self.best: dict[str, float] | None = None
+
+    def _on_training_start(self) -> None:
+        if self.from_start and not self.history:
+            self._validate()
 
     def _on_step(self) -> bool:
         if self.n_calls % self.every == 0:
@@ -57,9 +69,9 @@ class KeepBest(BaseCallback):
 
     def _validate(self) -> None:
         normalizer = self.model.get_vec_normalize_env()  # its statistics as they are now
-        agent = Agent(self.model, normalizer, {})
+        agent = Agent(self.model, normalizer, self.agent_config)
         seeds = range(VALIDATION_SEED, VALIDATION_SEED + self.episodes)
-        rows = evaluation.evaluate(self.env_id, lambda venv: agent, self.estimator, seeds,
+        rows = evaluation.evaluate(self.env_id, agent, self.estimator, seeds,
                                    max_episode_steps=self.max_episode_steps)
         score = {"timesteps": self.num_timesteps,
                  "failed": int(sum(row["failed"] for row in rows)),

@@ -24,6 +24,8 @@ import marine_envs
 from estimators import registry
 from estimators.registry import RAW
 
+from .residual import BASES as RESIDUAL_BASES
+
 #: The algorithms by name; a string ``"module:Class"`` is imported on first use (an extra's).
 ALGOS: dict[str, type[BaseAlgorithm] | str] = {
     "ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C,
@@ -70,9 +72,10 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     """The settings of ``algo`` on ``env_id``: the file's ``default`` section for ``algo``,
     updated with the env's own entry. Keys: ``n_timesteps``, ``n_envs``, ``policy``,
     ``normalize`` (a bool or ``VecNormalize``'s keyword arguments), optional ``policy_kwargs``,
-    ``failure_penalty`` and ``failure_cost_to_go`` (:class:`~agents.sb3.vec_env.FailurePenalty`) and
-    ``validation_episodes`` (:class:`~agents.sb3.callbacks.KeepBest`), and algorithm keyword
-    arguments (``learning_rate`` and ``clip_range`` may be RL-Zoo's ``"lin_<x>"``: decayed linearly
+    ``failure_penalty`` and ``failure_cost_to_go`` (:class:`~agents.sb3.vec_env.FailurePenalty`),
+    ``validation_episodes`` (:class:`~agents.sb3.callbacks.KeepBest`), ``residual`` and
+    ``residual_scale`` (:mod:`agents.sb3.residual`: a correction to that controller), and
+    algorithm keyword arguments (``learning_rate`` and ``clip_range`` may be RL-Zoo's ``"lin_<x>"``: decayed linearly
     to 0).
 
     The whole file is checked first (:func:`check_hyperparams`), not only the entry used.
@@ -170,10 +173,16 @@ _RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
     "policy": (lambda v: isinstance(v, str) and bool(v), "a policy name, e.g. MlpPolicy"),
     "policy_kwargs": (lambda v: isinstance(v, Mapping),
                       "the policy's keyword arguments, e.g. {net_arch: [64, 64]}"),
+    "residual": (lambda v: v in RESIDUAL_BASES, f"one of {', '.join(RESIDUAL_BASES)} (the "
+                 "controller the agent corrects)"),
+    "residual_scale": (lambda v: _is_number(v) and 0 < v <= 2,
+                       "a number in (0, 2]: the correction's bound, a fraction of each "
+                       "action's half range"),
 }
 #: Settings of ours (:func:`load_hyperparams`); the others are the algorithm's keyword arguments.
 OWN_SETTINGS = ("n_timesteps", "n_envs", "policy", "normalize", "policy_kwargs",
-                "failure_penalty", "failure_cost_to_go", "validation_episodes")
+                "failure_penalty", "failure_cost_to_go", "validation_episodes", "residual",
+                "residual_scale")
 #: The algorithms' keyword arguments that :func:`~agents.sb3.training.train` sets itself: not
 #: settings.
 _SET_BY_TRAIN = ("self", "policy", "env", "seed", "device", "verbose", "tensorboard_log",

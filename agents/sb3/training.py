@@ -42,6 +42,7 @@ from .hyperparams import (
     algorithm,
     settings,
 )
+from .residual import residual_of, zero_output
 from .runs import (
     CHECKPOINTS,
     Saved,
@@ -186,6 +187,11 @@ def resume(run: Path, timesteps: int | None = None, progress_bar: bool = True,
         return _run(config, run, saved, progress_bar, torch_threads)
 
 
+#: Validation episodes of a residual run whose settings give none: its correction must earn its
+#: place against the controller it corrects.
+RESIDUAL_VALIDATION_EPISODES = 8
+
+
 @dataclasses.dataclass(frozen=True)
 class _Penalty:
     """A run's failure penalty (reward units) and whether a failure also costs the rest of
@@ -206,6 +212,12 @@ def _algorithm_kwargs(config: Mapping[str, Any]) -> tuple[dict[str, Any], str, b
     penalty = _Penalty(float(params.pop("failure_penalty", 0.0)),
                        bool(params.pop("failure_cost_to_go", False)))
     validation_episodes = params.pop("validation_episodes", 0)
+    base, _ = residual_of(params)
+    for key in ("residual", "residual_scale"):  # the environments' (:func:`_environments`)
+        params.pop(key, None)
+    if base is not None and not validation_episodes:
+        # a correction is kept only where validation finds it better than the controller
+        validation_episodes = RESIDUAL_VALIDATION_EPISODES
     for key in ("learning_rate", "clip_range"):
         if key in params:
             params[key] = _schedule(params[key])
@@ -218,8 +230,10 @@ def _environments(config: Mapping[str, Any], saved: Saved | None, params: Mappin
     """The training environments: seeded on, after the steps already taken (a resumed run
     sees new episodes), behind the failure penalty and the normalisation (restored)."""
     start = 0 if saved is None else int(saved.timesteps or 0)
+    base, scale = residual_of(config["hyperparams"])
     venv = make_vec_env(config["env_id"], config["n_envs"], config["estimator"],
-                        config["seed"] + start, config["backend"], config["max_episode_steps"])
+                        config["seed"] + start, config["backend"], config["max_episode_steps"],
+                        residual=base, residual_scale=scale)
     if penalty.penalty or penalty.cost_to_go:
         steps = evaluation.episode_steps(config["env_id"], config["max_episode_steps"]) \
             if penalty.cost_to_go else None
@@ -256,6 +270,8 @@ def _run(config: dict[str, Any], out: Path, saved: Saved | None, progress_bar: b
             venv.close()
             raise ValueError(f"{config.get('hyperparams_file', 'the settings')}: {algo}: "
                              f"{error}") from None
+        if residual_of(config["hyperparams"])[0] is not None:
+            zero_output(model)  # the untrained correction is none: the agent starts as the base
         clear_run(out)
     else:
         schedules = {k: params[k] for k in ("learning_rate", "clip_range") if k in params}
@@ -330,9 +346,11 @@ def _keeper(config: Mapping[str, Any], out: Path, episodes: int, stop: _StopSign
     validations), or None."""
     if not episodes:
         return None
+    residual = residual_of(config["hyperparams"])[0] is not None
     keeper = KeepBest(config["env_id"], config["estimator"], episodes,
                       config["checkpoint_every"], out, config["max_episode_steps"],
-                      stopped=lambda: stop.requested)
+                      stopped=lambda: stop.requested, agent_config=config,
+                      from_start=residual)
     validation = config.get("validation") or {}
     keeper.history = list(validation.get("history", []))
     keeper.best = validation.get("selected")

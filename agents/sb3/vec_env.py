@@ -23,6 +23,7 @@ from estimators.registry import ORACLE, RAW
 
 from .. import evaluation
 from .hyperparams import BACKENDS, _check_choice, estimator_choices
+from .residual import DEFAULT_SCALE, ResidualVectorEnv, base_policy
 
 # -- the vector environment adapter ---------------------------------------------------------
 
@@ -201,7 +202,8 @@ def _single_env(env_id: str, estimator: str | None, max_episode_steps: int | Non
 
 
 def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: int = 0,
-                 backend: str = "native", max_episode_steps: int | None = None) -> VecEnv:
+                 backend: str = "native", max_episode_steps: int | None = None,
+                 residual: str | None = None, residual_scale: float = DEFAULT_SCALE) -> VecEnv:
     """``n_envs`` copies of ``env_id`` as an SB3 ``VecEnv`` with episode statistics
     (``info["episode"]``), seeded ``seed, seed + 1, ...`` at their first reset.
 
@@ -210,12 +212,18 @@ def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: i
     :param backend: ``"native"``: the batched env through :class:`SB3VecEnv`; ``"dummy"``:
         SB3's ``DummyVecEnv`` of single envs (same numbers, slower).
     :param max_episode_steps: episode length, steps (default: the registered one).
+    :param residual: the controller the actions correct (:mod:`agents.sb3.residual`), or None:
+        the actions are applied as they are. Native backend only.
+    :param residual_scale: the correction's bound, a fraction of each action's half range.
     """
     _check_choice("env_id", env_id, tuple(marine_envs.ENVIRONMENTS))
     _check_choice("estimator", estimator, estimator_choices())
     _check_choice("backend", backend, BACKENDS)
     if not (isinstance(n_envs, int) and n_envs >= 1):
         raise ValueError(f"n_envs={n_envs!r} is invalid: an integer >= 1")
+    if residual is not None and backend != "native":
+        raise ValueError(f"residual={residual!r} needs backend='native' (the batched env the "
+                         f"controller acts on), not {backend!r}")
     steps = evaluation.episode_steps(env_id, max_episode_steps)
     if backend == "dummy":
         venv: VecEnv = DummyVecEnv([lambda: Monitor(_single_env(env_id, estimator, steps))
@@ -223,8 +231,9 @@ def make_vec_env(env_id: str, n_envs: int, estimator: str | None = None, seed: i
     else:
         native = evaluation.make_env(env_id, n_envs, estimator or RAW,
                                      max_episode_steps=steps)
+        if residual is not None:
+            base = base_policy(residual, native, estimator or RAW)
+            native = ResidualVectorEnv(native, base, residual_scale)
         venv = VecMonitor(SB3VecEnv(native))
     venv.seed(seed)
     return venv
-
-
