@@ -20,6 +20,7 @@ from estimators.registry import RAW
 from .. import evaluation
 from .hyperparams import _torch_threads, algorithm
 from .runs import find_agent, read_config
+from .zoo import agent_path
 
 # -- using a trained agent ------------------------------------------------------------------
 
@@ -50,16 +51,23 @@ class Agent:
         action, self.memory = self.model.predict(obs, memory, episode_start, deterministic)
         return action, self.memory
 
+    @classmethod
+    def load(cls, name_or_path: str | Path) -> Agent:
+        """The agent :func:`load_agent` loads: a zoo name (``"zoo:ROV-v0/residual_ppo"``), a run
+        folder or a model file."""
+        return load_agent(name_or_path)
+
     @property
     def recurrent(self) -> bool:
         """Whether the policy has a memory (sb3-contrib's recurrent policies)."""
         return hasattr(self.model.policy, "lstm_hidden_state_shape")
 
 
-def load_agent(path: Path) -> Agent:
+def load_agent(path: str | Path) -> Agent:
     """The agent :func:`~agents.sb3.training.train` saved: ``path`` is its run folder, a checkpoint
-    or a model file of it (:func:`~agents.sb3.runs.find_agent`)."""
-    saved = find_agent(Path(path))
+    or a model file of it (:func:`~agents.sb3.runs.find_agent`), or the name of a shipped agent,
+    ``"zoo:ROV-v0/residual_ppo"`` (:func:`~agents.sb3.zoo.path_of`)."""
+    saved = find_agent(agent_path(path))
     config = read_config(saved.run)
     model = algorithm(config["algo"]).load(saved.model, device="cpu")
     normalizer = None
