@@ -1,5 +1,5 @@
 """The ``marine`` command line: demo, simulate, episode, reproduce, diagnose, validate, train,
-evaluate, bench, envs; one module a command (its parser beside its handler), the options they
+evaluate, zoo, bench, envs; one module a command (its parser beside its handler), the options they
 share in :mod:`agents.cli.common`.
 
 Every command checks what it is given (environment ids, numbers, input files, output paths and
@@ -35,7 +35,19 @@ import warnings
 from collections.abc import Iterator, Sequence
 from typing import Any, NoReturn
 
-from . import bench, demo, diagnose, envs, episode, evaluate, reproduce, simulate, train, validate
+from . import (
+    bench,
+    demo,
+    diagnose,
+    envs,
+    episode,
+    evaluate,
+    reproduce,
+    simulate,
+    train,
+    validate,
+    zoo,
+)
 from .common import DEBUG, EXIT_INTERRUPTED, EXIT_SIGNAL, EXIT_USAGE, SHARED, USER_ERRORS, Parser
 from .train import TRAIN_ALGOS, TRAIN_BACKENDS
 
@@ -53,7 +65,8 @@ Angles on the command line are in degrees; everything inside (and in recordings)
 #: The commands, in the order ``marine --help`` lists them. Each module says what the command is
 #: (``HELP``, ``DESCRIPTION``), which shared options it takes in its own words
 #: (``COMMON_OPTIONS``), its own arguments (``arguments``) and what it does (``handle``).
-COMMANDS = (demo, simulate, episode, reproduce, diagnose, validate, train, evaluate, bench, envs)
+COMMANDS = (demo, simulate, episode, reproduce, diagnose, validate, train, evaluate, zoo, bench,
+            envs)
 
 
 def build_parser() -> argparse.ArgumentParser:

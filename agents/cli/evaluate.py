@@ -4,13 +4,12 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from . import common
 
 #: The command's line in ``marine --help``.
-HELP = ("evaluate an agent 'marine train' saved: cost and errors over seeded "
-        "episodes")
+HELP = ("evaluate an agent 'marine train' saved (or a shipped one, zoo:...): cost and "
+        "errors over seeded episodes")
 #: The command's description in its help (argparse fills the lines anew).
 DESCRIPTION = """\
 Run the agent over seeded episodes behind its training estimator and print the task's quadratic
@@ -30,8 +29,10 @@ COMMON_OPTIONS = {
 def arguments(parser: argparse.ArgumentParser) -> None:
     """``marine evaluate``'s own arguments."""
     parser.add_argument("dir", help="the directory 'marine train --out' wrote (its model.zip, "
-                                    "else its latest checkpoint), or a model file in it "
-                                    "(e.g. checkpoints/model_8192_steps.zip)")
+                                    "else its latest checkpoint), a model file in it "
+                                    "(e.g. checkpoints/model_8192_steps.zip), or a shipped "
+                                    "agent's name (e.g. zoo:ROV-v0/residual_ppo: 'marine zoo' "
+                                    "lists them)")
     parser.add_argument("--episodes", type=common.positive_int, default=5,
                         help="episodes (default 5)")
 
@@ -45,10 +46,12 @@ def handle(args: argparse.Namespace) -> int:
 
     seed = 0 if args.seed is None else args.seed  # --seed's default here
     out = common.output_file(args.json, args.force, "--json")
-    saved = sb3.find_agent(Path(args.dir))  # a run folder, a checkpoint or a model file
+    # a run folder, a checkpoint, a model file or a zoo name
+    saved = sb3.find_agent(sb3.agent_path(args.dir))
     config = sb3.read_config(saved.run)
     steps = episode_steps(config["env_id"], config.get("max_episode_steps"))
-    print(f"{saved.model}" + (f" ({saved.timesteps} steps)" if saved.timesteps else "")
+    named = f"{args.dir} " if sb3.is_zoo_name(args.dir) else ""
+    print(f"{named}{saved.model}" + (f" ({saved.timesteps} steps)" if saved.timesteps else "")
           + f": {config['env_id']} behind {config.get('estimator') or 'raw'}")
     with common.progress_bar(steps, "evaluating", not args.quiet) as bar:
         rows = sb3.evaluate(saved.model, args.episodes, seed,

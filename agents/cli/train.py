@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from . import common
 
@@ -15,7 +16,8 @@ TRAIN_ALGOS = ("ppo", "sac", "td3", "a2c", "ppo_lstm")
 TRAIN_BACKENDS = ("native", "dummy")
 
 #: ``marine train`` options that --resume takes from the run's config.json instead.
-RESUME_TAKES = ("env_id", "algo", "estimator", "n_envs", "backend", "seed", "out", "config")
+RESUME_TAKES = ("env_id", "algo", "estimator", "n_envs", "backend", "seed", "out", "config",
+                "residual", "residual_scale")
 
 
 #: The command's line in ``marine --help``.
@@ -72,7 +74,10 @@ def arguments(parser: argparse.ArgumentParser) -> None:
                         help="continue the run in DIR (a 'marine train --out' folder) from its "
                              "last saved agent, with its config.json's settings")
     parser.add_argument("--config", metavar="YAML",
-                        help="hyperparameters file in agents/hyperparams.yaml's format")
+                        help="hyperparameters file in agents/hyperparams.yaml's format; its "
+                             "agent: section, if any, gives the environment id, --algo, "
+                             "--estimator, --seed and --out where not given (a zoo agent's "
+                             "re-train file, e.g. agents/zoo/ROV-v0/residual_ppo.yaml)")
     parser.set_defaults(run=lambda args: handle(args, parser))
 
 
@@ -89,27 +94,31 @@ def handle(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         # refuses a live run, then finds the last agent that loads, before any work
         result = sb3.resume(Path(args.resume), args.timesteps, progress_bar=not args.quiet)
     else:
-        if args.env_id is None or args.out is None:
-            parser.error("the environment id and --out DIR are required (or --resume DIR)")
-        common.check_estimator(args.estimator)
+        config = Path(args.config) if args.config else sb3.HYPERPARAMS
+        if not config.is_file():
+            raise FileNotFoundError(f"--config {config}: no such file")
+        run = _from_config(args, sb3.agent_section(config) if args.config else {})
+        if run["env_id"] is None or run["out"] is None:
+            parser.error("the environment id and --out DIR are required (or --resume DIR, or "
+                         "--config YAML whose agent: section gives them)")
+        common.check_estimator(run["estimator"])
         if args.residual_scale is not None and args.residual is None:
             parser.error("--residual-scale needs --residual")
         overrides = {key: value for key, value in (("residual", args.residual),
                                                    ("residual_scale", args.residual_scale))
                      if value is not None}
-        config = Path(args.config) if args.config else sb3.HYPERPARAMS
-        if not config.is_file():
-            raise FileNotFoundError(f"--config {config}: no such file")
-        sb3.settings(args.env_id, args.algo or "ppo", args.estimator, args.timesteps,
-                     args.seed or 0, args.n_envs, args.backend or "native", overrides,
+        sb3.settings(run["env_id"], run["algo"], run["estimator"], args.timesteps, run["seed"],
+                     args.n_envs, run["backend"], overrides,
+                     max_episode_steps=run["max_episode_steps"],
                      hyperparams_file=config)
-        sb3.check_not_in_use(Path(args.out))  # a live run is named as such, --force or not
-        out = common.output_dir(args.out, args.force, "--out", sb3.existing_run,
+        sb3.check_not_in_use(Path(run["out"]))  # a live run is named as such, --force or not
+        out = common.output_dir(run["out"], args.force, "--out", sb3.existing_run,
                                 " (a training run: --resume it)")
-        result = sb3.train(args.env_id, args.algo or "ppo", args.estimator, args.timesteps,
-                           out, args.seed or 0, args.n_envs, args.backend or "native",
+        result = sb3.train(run["env_id"], run["algo"], run["estimator"], args.timesteps,
+                           out, run["seed"], args.n_envs, run["backend"],
                            progress_bar=not args.quiet, hyperparams=overrides,
-                           hyperparams_file=config, force=args.force)
+                           max_episode_steps=run["max_episode_steps"], hyperparams_file=config,
+                           force=args.force)
     if result.stop_signal is not None:
         print(f"marine train: interrupted at {result.timesteps} steps, saved to {result.out} "
               f"(continue: marine train --resume {result.out})", file=sys.stderr)
@@ -126,6 +135,16 @@ def handle(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             print("no correction scored better than the controller it corrects: the agent "
                   "is that controller (it learnt nothing to keep)")
     return 0
+
+
+def _from_config(args: argparse.Namespace, section: dict[str, Any]) -> dict[str, Any]:
+    """The run's settings: those given on the command line, else the config file's ``agent:``
+    section's (a zoo agent's re-train file), else the defaults."""
+    defaults = {"env_id": None, "algo": "ppo", "estimator": None, "seed": 0, "out": None,
+                "backend": "native", "max_episode_steps": None}
+    given = {key: getattr(args, key, None) for key in defaults}
+    return {key: given[key] if given[key] is not None else section.get(key, default)
+            for key, default in defaults.items()}
 
 
 def _option(dest: str) -> str:

@@ -15,16 +15,20 @@ One idea a module:
 * :mod:`agents.sb3.training`: :func:`~agents.sb3.training.train` and
   :func:`~agents.sb3.training.resume`;
 * :mod:`agents.sb3.agent`: a trained agent in use (:func:`~agents.sb3.agent.load_agent`,
-  :func:`~agents.sb3.agent.evaluate`).
+  :func:`~agents.sb3.agent.evaluate`);
+* :mod:`agents.sb3.zoo`: the trained agents shipped with the package, loaded by name
+  (``zoo:ROV-v0/residual_ppo``), published from a finished run (:func:`~agents.sb3.zoo.publish`).
 
 Every public name is importable from here, as ``agents.sb3.train`` and so on.
 """
 
 from __future__ import annotations
 
+from . import zoo
 from .agent import Agent, evaluate, load_agent
 from .callbacks import KeepBest
 from .hyperparams import (
+    AGENT_SECTION,
     ALGO_EXTRAS,
     ALGOS,
     BACKENDS,
@@ -35,6 +39,7 @@ from .hyperparams import (
     OWN_SETTINGS,
     RUNNING,
     VALIDATION_SEED,
+    agent_section,
     algorithm,
     check_hyperparams,
     estimator_choices,
@@ -60,13 +65,15 @@ from .runs import (
 )
 from .training import TrainResult, resume, train
 from .vec_env import FailurePenalty, SB3VecEnv, make_vec_env
+from .zoo import ZOO, ZooEntry, agent_path, is_zoo_name, kind_of
 
 __all__ = [
-    "ALGOS", "ALGO_EXTRAS", "BACKENDS", "CHECKPOINTS", "COMPLETE", "CONFIG", "HYPERPARAMS",
-    "INTERRUPTED", "LOCK", "ON_POLICY", "OWNED", "OWN_SETTINGS", "RUNNING", "VALIDATION_SEED",
-    "Agent", "FailurePenalty", "FallbackWarning", "KeepBest", "RunInUse", "SB3VecEnv", "Saved",
-    "TrainResult", "algorithm", "check_hyperparams", "check_not_in_use", "checkpoints",
-    "clear_run", "estimator_choices", "evaluate", "existing_run", "find_agent", "latest",
-    "load_agent", "load_hyperparams", "make_vec_env", "read_config", "resume", "run_lock",
-    "settings", "train",
+    "AGENT_SECTION", "ALGOS", "ALGO_EXTRAS", "BACKENDS", "CHECKPOINTS", "COMPLETE", "CONFIG",
+    "HYPERPARAMS", "INTERRUPTED", "LOCK", "ON_POLICY", "OWNED", "OWN_SETTINGS", "RUNNING",
+    "VALIDATION_SEED", "ZOO", "Agent", "FailurePenalty", "FallbackWarning", "KeepBest",
+    "RunInUse", "SB3VecEnv", "Saved", "TrainResult", "ZooEntry", "agent_path", "agent_section",
+    "algorithm", "check_hyperparams", "check_not_in_use", "checkpoints", "clear_run",
+    "estimator_choices", "evaluate", "existing_run", "find_agent", "is_zoo_name", "kind_of",
+    "latest", "load_agent", "load_hyperparams", "make_vec_env",
+    "read_config", "resume", "run_lock", "settings", "train", "zoo",
 ]

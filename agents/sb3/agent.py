@@ -21,6 +21,7 @@ from .. import evaluation
 from .hyperparams import _torch_threads, algorithm
 from .residual import ResidualPolicy, base_policy, residual_of
 from .runs import find_agent, read_config
+from .zoo import agent_path, kind_of
 
 # -- using a trained agent ------------------------------------------------------------------
 
@@ -69,9 +70,13 @@ class Agent:
     def kind(self) -> str:
         """The agent's name in tables and in the zoo: its algorithm (``ppo``), prefixed
         ``residual_`` for a correction to a controller (``residual_ppo``)."""
-        algo = self.config.get("algo", type(self.model).__name__.lower())
-        return f"residual_{algo}" if residual_of(self.config.get("hyperparams", {}))[0] \
-            else algo
+        return kind_of(self.config)
+
+    @classmethod
+    def load(cls, name_or_path: str | Path) -> Agent:
+        """The agent :func:`load_agent` loads: a zoo name (``"zoo:ROV-v0/residual_ppo"``), a run
+        folder or a model file."""
+        return load_agent(name_or_path)
 
     @property
     def recurrent(self) -> bool:
@@ -79,10 +84,11 @@ class Agent:
         return hasattr(self.model.policy, "lstm_hidden_state_shape")
 
 
-def load_agent(path: Path) -> Agent:
+def load_agent(path: str | Path) -> Agent:
     """The agent :func:`~agents.sb3.training.train` saved: ``path`` is its run folder, a checkpoint
-    or a model file of it (:func:`~agents.sb3.runs.find_agent`)."""
-    saved = find_agent(Path(path))
+    or a model file of it (:func:`~agents.sb3.runs.find_agent`), or the name of a shipped agent,
+    ``"zoo:ROV-v0/residual_ppo"`` (:func:`~agents.sb3.zoo.path_of`)."""
+    saved = find_agent(agent_path(path))
     config = read_config(saved.run)
     model = algorithm(config["algo"]).load(saved.model, device="cpu")
     normalizer = None

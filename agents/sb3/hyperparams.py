@@ -75,8 +75,8 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     ``failure_penalty`` and ``failure_cost_to_go`` (:class:`~agents.sb3.vec_env.FailurePenalty`),
     ``validation_episodes`` (:class:`~agents.sb3.callbacks.KeepBest`), ``residual`` and
     ``residual_scale`` (:mod:`agents.sb3.residual`: a correction to that controller), and
-    algorithm keyword arguments (``learning_rate`` and ``clip_range`` may be RL-Zoo's ``"lin_<x>"``: decayed linearly
-    to 0).
+    algorithm keyword arguments (``learning_rate`` and ``clip_range`` may be RL-Zoo's
+    ``"lin_<x>"``: decayed linearly to 0).
 
     The whole file is checked first (:func:`check_hyperparams`), not only the entry used.
 
@@ -85,13 +85,7 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     """
     _check_choice("env_id", env_id, tuple(marine_envs.ENVIRONMENTS))
     _check_choice("algo", algo, tuple(ALGOS))
-    import yaml  # here: only reading the settings needs PyYAML
-
-    try:
-        table = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as error:
-        raise ValueError(f"{path}: invalid YAML: {_one_line(error)}") from None
-    check_hyperparams(table, path)
+    table = _read_table(path)
     sections = [table.get(key, {}).get(algo) or {} for key in ("default", env_id)]
     params = {**sections[0], **sections[1]}
     if not params:
@@ -102,6 +96,29 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     return params
 
 
+def agent_section(path: Path) -> dict[str, Any]:
+    """The ``agent:`` section of the hyperparameter file ``path`` (:data:`AGENT_SECTION`): what
+    ``marine train --config`` takes on its command line (``env_id``, ``algo``, ``estimator``,
+    ``seed``, ``out``, ``backend``, ``max_episode_steps``), each optional; empty if it has none.
+    The whole file is checked first (:func:`check_hyperparams`).
+
+    :raises ValueError: an unreadable file or a mistake in it, named with the file.
+    """
+    return dict(_read_table(Path(path)).get(AGENT_SECTION) or {})
+
+
+def _read_table(path: Path) -> dict[str, Any]:
+    """The hyperparameter file ``path``, read and checked (:func:`check_hyperparams`)."""
+    import yaml  # here: only reading the settings needs PyYAML
+
+    try:
+        table = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as error:
+        raise ValueError(f"{path}: invalid YAML: {_one_line(error)}") from None
+    check_hyperparams(table, path)
+    return table
+
+
 def check_hyperparams(table: Any, path: Path) -> None:
     """Check a hyperparameter table as read from ``path``: sections named by environment ids
     or ``default``, algorithms of :data:`ALGOS` in them, and in each the settings of ours
@@ -110,6 +127,9 @@ def check_hyperparams(table: Any, path: Path) -> None:
     epochs >= 1, rates > 0 (or ``"lin_<x>"``), ``normalize`` a bool or ``VecNormalize``'s
     keyword arguments, ...
 
+    An ``agent:`` section (:data:`AGENT_SECTION`) may give the run's command-line settings
+    (:func:`agent_section`).
+
     :raises ValueError: the first mistake, named with ``path`` and where in it (a short id such
         as ``USV-v0`` for a section gets the full one suggested).
     """
@@ -117,9 +137,12 @@ def check_hyperparams(table: Any, path: Path) -> None:
         raise ValueError(f"{path}: must map environment ids (and 'default') to algorithms to "
                          "settings, as agents/hyperparams.yaml does")
     for section, entries in table.items():
+        if section == AGENT_SECTION:
+            _check_agent_section(entries, f"{path}: {AGENT_SECTION}")
+            continue
         if section != "default" and section not in marine_envs.ENVIRONMENTS:
             raise ValueError(f"{path}: unknown section {section!r}{_env_suggestion(section)}: "
-                             "sections are 'default' and environment ids "
+                             f"sections are 'default', '{AGENT_SECTION}' and environment ids "
                              f"({', '.join(marine_envs.ENVIRONMENTS)})")
         if not isinstance(entries, dict):
             raise ValueError(f"{path}: {section}: must map algorithms to their settings, "
@@ -131,6 +154,43 @@ def check_hyperparams(table: Any, path: Path) -> None:
             if not isinstance(entry, dict | None):
                 raise ValueError(f"{path}: {section}: {algo}: must map setting names to values")
             _check_settings(entry or {}, algo, f"{path}: {section}: {algo}")
+
+
+#: The section of a hyperparameter file that gives a run's command-line settings (a zoo agent's
+#: re-train file has one), e.g. ``agent: {env_id: marine_envs/ROV-v0, algo: ppo, estimator: kf,
+#: seed: 0, out: runs/zoo/ROV-v0/residual_ppo}``.
+AGENT_SECTION = "agent"
+#: What each entry of the ``agent:`` section must be (said so in an error).
+_AGENT_RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
+    "env_id": (lambda v: v in marine_envs.ENVIRONMENTS,
+               f"one of {', '.join(marine_envs.ENVIRONMENTS)}"),
+    "algo": (lambda v: v in ALGOS, f"one of {', '.join(ALGOS)}"),
+    "estimator": (lambda v: isinstance(v, str) and v in estimator_choices(),
+                  f"one of {', '.join(registry.names())}"),
+    "seed": (lambda v: _is_int(v) and v >= 0, "an integer >= 0"),
+    "out": (lambda v: isinstance(v, str) and bool(v.strip()), "a folder, e.g. runs/zoo/ROV"),
+    "backend": (lambda v: v in BACKENDS, f"one of {', '.join(BACKENDS)}"),
+    "max_episode_steps": (lambda v: v is None or (_is_int(v) and v >= 1),
+                          "an integer >= 1 (or null: the registered length)"),
+}
+
+
+def _check_agent_section(section: Any, where: str) -> None:
+    """Check the ``agent:`` section of a hyperparameter file (:func:`agent_section`).
+
+    :raises ValueError: the first unknown entry or bad value, named with ``where``.
+    """
+    if not isinstance(section, dict):
+        raise ValueError(f"{where}: must map {', '.join(_AGENT_RULES)} to values, e.g. "
+                         "'agent: {env_id: marine_envs/ROV-v0, algo: ppo, estimator: kf}'")
+    for key, value in section.items():
+        if key not in _AGENT_RULES:
+            raise ValueError(f"{where}: unknown entry {key!r}{_did_you_mean(key, _AGENT_RULES)}: "
+                             f"one of {', '.join(_AGENT_RULES)}")
+        check, what = _AGENT_RULES[key]
+        if not check(value):
+            hint = _env_suggestion(value) if key == "env_id" else ""
+            raise ValueError(f"{where}: {key}={value!r} is invalid{hint}: {what}")
 
 
 def _is_int(value: Any) -> bool:
