@@ -31,6 +31,9 @@ ALGOS: dict[str, type[BaseAlgorithm] | str] = {
     "ppo": PPO, "sac": SAC, "td3": TD3, "a2c": A2C,
     "ppo_lstm": "sb3_contrib:RecurrentPPO",  # RL-Zoo's name; the `recurrent` extra
 }
+#: A hyperparameter entry ``residual_<algo>`` holds ``<algo>``'s settings as a correction to a
+#: controller (read for ``marine train --residual``).
+RESIDUAL_PREFIX = "residual_"
 #: The extra that installs each algorithm imported on first use.
 ALGO_EXTRAS = {"ppo_lstm": "recurrent"}
 BACKENDS = ("native", "dummy")
@@ -68,15 +71,18 @@ def algorithm(name: str) -> type[BaseAlgorithm]:
     return found
 
 
-def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[str, Any]:
+def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS,
+                     residual: bool = False) -> dict[str, Any]:
     """The settings of ``algo`` on ``env_id``: the file's ``default`` section for ``algo``,
-    updated with the env's own entry. Keys: ``n_timesteps``, ``n_envs``, ``policy``,
-    ``normalize`` (a bool or ``VecNormalize``'s keyword arguments), optional ``policy_kwargs``,
-    ``failure_penalty`` and ``failure_cost_to_go`` (:class:`~agents.sb3.vec_env.FailurePenalty`),
-    ``validation_episodes`` (:class:`~agents.sb3.callbacks.KeepBest`), ``residual`` and
-    ``residual_scale`` (:mod:`agents.sb3.residual`: a correction to that controller), and
-    algorithm keyword arguments (``learning_rate`` and ``clip_range`` may be RL-Zoo's
-    ``"lin_<x>"``: decayed linearly to 0).
+    updated with the env's own entry; with ``residual``, those of ``residual_<algo>`` (the
+    algorithm learning a correction to a controller), where the file has them. Keys:
+    ``n_timesteps``, ``n_envs``, ``policy``, ``normalize`` (a bool or ``VecNormalize``'s keyword
+    arguments), optional ``policy_kwargs``, ``failure_penalty`` and ``failure_cost_to_go``
+    (:class:`~agents.sb3.vec_env.FailurePenalty`), ``validation_episodes``
+    (:class:`~agents.sb3.callbacks.KeepBest`), ``residual`` and ``residual_scale``
+    (:mod:`agents.sb3.residual`: a correction to that controller), and algorithm keyword
+    arguments (``learning_rate`` and ``clip_range`` may be RL-Zoo's ``"lin_<x>"``: decayed
+    linearly to 0).
 
     The whole file is checked first (:func:`check_hyperparams`), not only the entry used.
 
@@ -86,7 +92,10 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     _check_choice("env_id", env_id, tuple(marine_envs.ENVIRONMENTS))
     _check_choice("algo", algo, tuple(ALGOS))
     table = _read_table(path)
-    sections = [table.get(key, {}).get(algo) or {} for key in ("default", env_id)]
+    names = (f"{RESIDUAL_PREFIX}{algo}", algo) if residual else (algo,)
+    name = next((n for n in names if any(n in (table.get(key) or {})
+                                         for key in ("default", env_id))), algo)
+    sections = [(table.get(key) or {}).get(name) or {} for key in ("default", env_id)]
     params = {**sections[0], **sections[1]}
     if not params:
         raise ValueError(f"{path} has no settings for algo {algo!r} (nor a default)")
@@ -147,13 +156,15 @@ def check_hyperparams(table: Any, path: Path) -> None:
         if not isinstance(entries, dict):
             raise ValueError(f"{path}: {section}: must map algorithms to their settings, "
                              "e.g. 'ppo: {n_steps: 512}'")
-        for algo, entry in entries.items():
+        for name, entry in entries.items():
+            algo = str(name).removeprefix(RESIDUAL_PREFIX)
             if algo not in ALGOS:
-                raise ValueError(f"{path}: {section}: unknown algorithm {algo!r}"
-                                 f"{_did_you_mean(algo, ALGOS)}: one of {', '.join(ALGOS)}")
+                raise ValueError(f"{path}: {section}: unknown algorithm {name!r}"
+                                 f"{_did_you_mean(name, ALGOS)}: one of {', '.join(ALGOS)} "
+                                 f"(or {RESIDUAL_PREFIX}ALGO: its settings as a correction)")
             if not isinstance(entry, dict | None):
-                raise ValueError(f"{path}: {section}: {algo}: must map setting names to values")
-            _check_settings(entry or {}, algo, f"{path}: {section}: {algo}")
+                raise ValueError(f"{path}: {section}: {name}: must map setting names to values")
+            _check_settings(entry or {}, algo, f"{path}: {section}: {name}")
 
 
 #: The section of a hyperparameter file that gives a run's command-line settings (a zoo agent's
@@ -353,7 +364,8 @@ def settings(env_id: str, algo: str = "ppo", estimator: str | None = None,
     _check_choice("estimator", estimator, estimator_choices())
     _check_choice("backend", backend, BACKENDS)
     _check_settings(dict(hyperparams or {}), algo, "hyperparams")
-    params = {**load_hyperparams(env_id, algo, Path(hyperparams_file)),
+    residual = (hyperparams or {}).get("residual") is not None
+    params = {**load_hyperparams(env_id, algo, Path(hyperparams_file), residual),
               **dict(hyperparams or {})}
     yaml_timesteps, yaml_envs = params.pop("n_timesteps"), params.pop("n_envs")
     timesteps = int(yaml_timesteps if timesteps is None else timesteps)
