@@ -333,6 +333,9 @@ def parse(argv: Sequence[str]) -> tuple[argparse.ArgumentParser, argparse.Namesp
                              "(the YAML's settings; hours each)")
     source.add_argument("--zoo", action="store_true",
                         help="score the shipped agents (agents/zoo/) instead of --runs")
+    parser.add_argument("--record", action="store_true",
+                        help="with --zoo: write each shipped agent's measured ratios onto its "
+                             "card (what 'marine zoo' lists)")
     parser.add_argument("--runs", type=Path, default=Path("runs/rl_vs_lqr"), metavar="DIR",
                         help="the run folders {Env}-{kind}-{estimator}-seed{seed} "
                              "(default runs/rl_vs_lqr)")
@@ -388,6 +391,8 @@ def check(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     if first is not None and not HELD_OUT_LOW <= first <= HELD_OUT_HIGH - args.held_out_episodes:
         parser.error(f"--held-out-first {first}: in [{HELD_OUT_LOW}, "
                      f"{HELD_OUT_HIGH - args.held_out_episodes}] (away from the tuning seeds)")
+    if args.record and not args.zoo:
+        parser.error("--record writes the shipped agents' cards: it needs --zoo")
     if args.readme is not None:
         try:
             report.check_markers(args.readme.read_text(encoding="utf-8"), str(args.readme))
@@ -492,10 +497,32 @@ def main(argv: Sequence[str] | None = None) -> None:
                         "training seed a point (x: a failed episode)", bench, figure)
     if args.json:
         write_json(args.json, results)
+    if args.record:
+        record_scores(results["sets"], bench.record["date"])
     if args.docs:
         bench.write_page(args.docs, TITLE, ABOUT)
     if args.readme is not None:
         write_readme(args.readme, held, bool(sets[1].seas), bench, args.docs)
+
+
+def record_scores(sets: dict[str, Any], date: str) -> None:
+    """Write each shipped agent's ratio to LQR behind kf on each set onto its card."""
+    names = {"tuning": "tuning", "held-out": "held_out"}
+    scores: dict[str, dict[str, Any]] = {}
+    for name, found in sets.items():
+        reference = {r["vehicle"]: r for r in found["rows"]
+                     if r["kind"] == "lqr" and r["estimator"] == report.REFERENCE}
+        for r in found["rows"]:
+            if r["source"] is None or not sb3.is_zoo_name(r["source"]):
+                continue
+            lqr = reference[r["vehicle"]]
+            scores.setdefault(r["source"], {})[names[name]] = {
+                "seeds": found["seeds"], "cost_ratio": r["ratio"], "cost": r["cost"],
+                "lqr_cost": lqr["cost"], "failed": r["failed"], "lqr_failed": lqr["failed"],
+                "measured": date}
+    for agent, measured in scores.items():
+        sb3.zoo.record_scores(agent, measured)
+        print(f"recorded the scores of {agent} on its card", flush=True)
 
 
 def write_readme(path: Path, held: dict[str, Any], drawn_sea: bool, bench: Run,
