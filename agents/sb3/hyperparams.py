@@ -70,7 +70,8 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS) -> dict[s
     """The settings of ``algo`` on ``env_id``: the file's ``default`` section for ``algo``,
     updated with the env's own entry. Keys: ``n_timesteps``, ``n_envs``, ``policy``,
     ``normalize`` (a bool or ``VecNormalize``'s keyword arguments), optional ``policy_kwargs``,
-    ``failure_penalty`` and ``failure_cost_to_go`` (:class:`~agents.sb3.vec_env.FailurePenalty`) and
+    ``failure_penalty`` and ``failure_cost_to_go`` (:class:`~agents.sb3.vec_env.FailurePenalty`),
+    ``action_rate_penalty`` (:class:`~agents.sb3.vec_env.ActionRatePenalty`) and
     ``validation_episodes`` (:class:`~agents.sb3.callbacks.KeepBest`), and algorithm keyword
     arguments (``learning_rate`` and ``clip_range`` may be RL-Zoo's ``"lin_<x>"``: decayed linearly
     to 0).
@@ -165,6 +166,7 @@ _RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
     "gamma": _FRACTION, "gae_lambda": _FRACTION, "tau": _FRACTION,
     "failure_penalty": (lambda v: _is_number(v) and v >= 0, "a finite number >= 0"),
     "failure_cost_to_go": (lambda v: isinstance(v, bool), "true or false"),
+    "action_rate_penalty": (lambda v: _is_number(v) and v >= 0, "a finite number >= 0"),
     "normalize": (lambda v: isinstance(v, bool | Mapping),
                   "true, false or VecNormalize's keyword arguments, e.g. {clip_reward: 10000}"),
     "policy": (lambda v: isinstance(v, str) and bool(v), "a policy name, e.g. MlpPolicy"),
@@ -173,7 +175,8 @@ _RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
 }
 #: Settings of ours (:func:`load_hyperparams`); the others are the algorithm's keyword arguments.
 OWN_SETTINGS = ("n_timesteps", "n_envs", "policy", "normalize", "policy_kwargs",
-                "failure_penalty", "failure_cost_to_go", "validation_episodes")
+                "failure_penalty", "failure_cost_to_go", "action_rate_penalty",
+                "validation_episodes")
 #: The algorithms' keyword arguments that :func:`~agents.sb3.training.train` sets itself: not
 #: settings.
 _SET_BY_TRAIN = ("self", "policy", "env", "seed", "device", "verbose", "tensorboard_log",
