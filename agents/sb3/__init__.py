@@ -66,7 +66,7 @@ __all__ = [
     "INTERRUPTED", "LOCK", "ON_POLICY", "OWNED", "OWN_SETTINGS", "RUNNING", "VALIDATION_SEED",
     "ActionRatePenalty", "Agent", "FailurePenalty", "FallbackWarning", "KeepBest", "RunInUse",
     "SB3VecEnv", "Saved", "TrainResult", "algorithm", "check_hyperparams", "check_not_in_use",
-    "checkpoints", "clear_run", "estimator_choices", "evaluate", "existing_run", "find_agent", "latest",
-    "load_agent", "load_hyperparams", "make_vec_env", "read_config", "resume", "run_lock",
-    "settings", "train",
+    "checkpoints", "clear_run", "estimator_choices", "evaluate", "existing_run", "find_agent",
+    "latest", "load_agent", "load_hyperparams", "make_vec_env", "read_config", "resume",
+    "run_lock", "settings", "train",
 ]
