@@ -59,14 +59,20 @@ from .runs import (
     run_lock,
 )
 from .training import TrainResult, resume, train
-from .vec_env import ActionRatePenalty, FailurePenalty, SB3VecEnv, make_vec_env
+from .vec_env import (
+    ActionRatePenalty,
+    FailurePenalty,
+    RewardScale,
+    SB3VecEnv,
+    make_vec_env,
+)
 
 __all__ = [
     "ALGOS", "ALGO_EXTRAS", "BACKENDS", "CHECKPOINTS", "COMPLETE", "CONFIG", "HYPERPARAMS",
     "INTERRUPTED", "LOCK", "ON_POLICY", "OWNED", "OWN_SETTINGS", "RUNNING", "VALIDATION_SEED",
-    "ActionRatePenalty", "Agent", "FailurePenalty", "FallbackWarning", "KeepBest", "RunInUse",
-    "SB3VecEnv", "Saved", "TrainResult", "algorithm", "check_hyperparams", "check_not_in_use",
-    "checkpoints", "clear_run", "estimator_choices", "evaluate", "existing_run", "find_agent",
-    "latest", "load_agent", "load_hyperparams", "make_vec_env", "read_config", "resume",
-    "run_lock", "settings", "train",
+    "ActionRatePenalty", "Agent", "FailurePenalty", "FallbackWarning", "KeepBest", "RewardScale",
+    "RunInUse", "SB3VecEnv", "Saved", "TrainResult", "algorithm", "check_hyperparams",
+    "check_not_in_use", "checkpoints", "clear_run", "estimator_choices", "evaluate",
+    "existing_run", "find_agent", "latest", "load_agent", "load_hyperparams", "make_vec_env",
+    "read_config", "resume", "run_lock", "settings", "train",
 ]

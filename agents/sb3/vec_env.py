@@ -1,7 +1,8 @@
 """The vector environments SB3 trains on: the native batched environment seen as an SB3
 ``VecEnv`` (:class:`SB3VecEnv`), or SB3's ``DummyVecEnv`` of single environments, optionally
 behind a state estimator (:func:`make_vec_env`), and the reward shaping of training: the failure
-penalty (:class:`FailurePenalty`) and the action-rate penalty (:class:`ActionRatePenalty`).
+penalty (:class:`FailurePenalty`), the action-rate penalty (:class:`ActionRatePenalty`) and a
+fixed reward scale (:class:`RewardScale`).
 """
 
 from __future__ import annotations
@@ -223,6 +224,32 @@ class ActionRatePenalty(VecEnvWrapper):
         self._previous = self._actions.copy()
         self._first = np.asarray(dones, dtype=bool).copy()  # a new episode starts next step
         return obs, (rewards - charge).astype(np.float32), dones, infos
+
+
+class RewardScale(VecEnvWrapper):
+    """Multiply each step's reward by ``scale`` (training only): a fixed scale for a run that
+    does not normalise its rewards.
+
+    VecNormalize divides the rewards by the standard deviation of the discounted return over
+    all of training. Where early episodes cost orders of magnitude more than a good agent's
+    (a DP vessel driving off costs ~1e3 a step and the failure's cost-to-go ~1e6, keeping
+    station ~1), that running figure stays at the early returns', so a good agent's rewards
+    shrink to ~1e-5 and its value function cannot tell them apart; a fixed scale keeps them
+    as they are.
+    """
+
+    def __init__(self, venv: VecEnv, scale: float) -> None:
+        if not (math.isfinite(scale) and scale > 0):
+            raise ValueError(f"reward_scale={scale!r} is invalid: a finite number > 0")
+        super().__init__(venv)
+        self.scale = float(scale)
+
+    def reset(self) -> VecEnvObs:
+        return self.venv.reset()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        return obs, (np.asarray(rewards) * self.scale).astype(np.float32), dones, infos
 
 
 # -- building environments ------------------------------------------------------------------

@@ -1,13 +1,14 @@
-"""The action-rate penalty of training (agents.sb3.ActionRatePenalty, setting
-``action_rate_penalty``): what it charges, when it charges nothing, and that a run's setting
-puts it in front of the agent."""
+"""The reward shaping of training: the action-rate penalty (agents.sb3.ActionRatePenalty,
+setting ``action_rate_penalty``) and the fixed reward scale (agents.sb3.RewardScale, setting
+``reward_scale``): what they do to the reward, and that a run's settings put them in front of the
+agent."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from agents.sb3 import ActionRatePenalty, check_hyperparams, make_vec_env, settings
+from agents.sb3 import ActionRatePenalty, RewardScale, check_hyperparams, make_vec_env, settings
 from agents.sb3.training import _algorithm_kwargs, _environments
 
 USV = "marine_envs/USV-v0"
@@ -61,3 +62,30 @@ def test_the_setting_puts_the_penalty_in_training_and_a_bad_value_is_named(tmp_p
         settings(USV, "ppo", hyperparams={"action_rate_penalty": -1.0})
     with pytest.raises(ValueError, match="action_rate_penalty"):
         check_hyperparams({USV: {"ppo": {"action_rate_penalty": "high"}}}, tmp_path / "h.yaml")
+
+
+def test_the_reward_scale_multiplies_every_reward_and_a_bad_scale_is_refused():
+    scaled = RewardScale(make_vec_env(USV, 2, estimator="kf", seed=3), 1.0e-3)
+    plain = make_vec_env(USV, 2, estimator="kf", seed=3)
+    scaled.reset(), plain.reset()
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        action = rng.uniform(-1, 1, size=(2, *plain.action_space.shape)).astype(np.float32)
+        _, reward, _, _ = scaled.step(action)
+        _, base, _, _ = plain.step(action)
+        assert np.all(base < 0)  # a cost: the test sees the rewards, not zeros
+        np.testing.assert_allclose(reward, 1.0e-3 * base, rtol=1e-6)
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="reward_scale"):
+            RewardScale(plain, bad)
+
+
+def test_the_reward_scale_setting_wraps_the_training_env_inside_the_normalisation():
+    config = settings(USV, "ppo", "kf", hyperparams={"reward_scale": 0.01,
+                                                     "normalize": {"norm_reward": False}})
+    params, _, normalize, normalize_kwargs, penalty, _ = _algorithm_kwargs(config)
+    venv = _environments(config, None, params, normalize, normalize_kwargs, penalty)
+    assert isinstance(venv.venv, RewardScale) and venv.venv.scale == 0.01
+    venv.close()
+    with pytest.raises(ValueError, match="reward_scale=0 is invalid"):
+        settings(USV, "ppo", hyperparams={"reward_scale": 0})
