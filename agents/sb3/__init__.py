@@ -64,16 +64,22 @@ from .runs import (
     run_lock,
 )
 from .training import TrainResult, resume, train
-from .vec_env import FailurePenalty, SB3VecEnv, make_vec_env
+from .vec_env import (
+    ActionRatePenalty,
+    FailurePenalty,
+    RewardScale,
+    SB3VecEnv,
+    make_vec_env,
+)
 from .zoo import ZOO, ZooEntry, agent_path, is_zoo_name, kind_of
 
 __all__ = [
     "AGENT_SECTION", "ALGOS", "ALGO_EXTRAS", "BACKENDS", "CHECKPOINTS", "COMPLETE", "CONFIG",
     "HYPERPARAMS", "INTERRUPTED", "LOCK", "ON_POLICY", "OWNED", "OWN_SETTINGS", "RUNNING",
-    "VALIDATION_SEED", "ZOO", "Agent", "FailurePenalty", "FallbackWarning", "KeepBest",
-    "RunInUse", "SB3VecEnv", "Saved", "TrainResult", "ZooEntry", "agent_path", "agent_section",
-    "algorithm", "check_hyperparams", "check_not_in_use", "checkpoints", "clear_run",
-    "estimator_choices", "evaluate", "existing_run", "find_agent", "is_zoo_name", "kind_of",
-    "latest", "load_agent", "load_hyperparams", "make_vec_env",
+    "VALIDATION_SEED", "ZOO", "ActionRatePenalty", "Agent", "FailurePenalty", "FallbackWarning",
+    "KeepBest", "RewardScale", "RunInUse", "SB3VecEnv", "Saved", "TrainResult", "ZooEntry",
+    "agent_path", "agent_section", "algorithm", "check_hyperparams", "check_not_in_use",
+    "checkpoints", "clear_run", "estimator_choices", "evaluate", "existing_run", "find_agent",
+    "is_zoo_name", "kind_of", "latest", "load_agent", "load_hyperparams", "make_vec_env",
     "read_config", "resume", "run_lock", "settings", "train", "zoo",
 ]

@@ -78,7 +78,9 @@ def load_hyperparams(env_id: str, algo: str, path: Path = HYPERPARAMS,
     algorithm learning a correction to a controller), where the file has them. Keys:
     ``n_timesteps``, ``n_envs``, ``policy``, ``normalize`` (a bool or ``VecNormalize``'s keyword
     arguments), optional ``policy_kwargs``, ``failure_penalty`` and ``failure_cost_to_go``
-    (:class:`~agents.sb3.vec_env.FailurePenalty`), ``validation_episodes``
+    (:class:`~agents.sb3.vec_env.FailurePenalty`), ``action_rate_penalty``
+    (:class:`~agents.sb3.vec_env.ActionRatePenalty`), ``reward_scale``
+    (:class:`~agents.sb3.vec_env.RewardScale`), ``validation_episodes``
     (:class:`~agents.sb3.callbacks.KeepBest`), ``residual`` and ``residual_scale``
     (:mod:`agents.sb3.residual`: a correction to that controller), and algorithm keyword
     arguments (``learning_rate`` and ``clip_range`` may be RL-Zoo's ``"lin_<x>"``: decayed
@@ -239,6 +241,8 @@ _RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
     "gamma": _FRACTION, "gae_lambda": _FRACTION, "tau": _FRACTION,
     "failure_penalty": (lambda v: _is_number(v) and v >= 0, "a finite number >= 0"),
     "failure_cost_to_go": (lambda v: isinstance(v, bool), "true or false"),
+    "action_rate_penalty": (lambda v: _is_number(v) and v >= 0, "a finite number >= 0"),
+    "reward_scale": (lambda v: _is_number(v) and v > 0, "a finite number > 0"),
     "normalize": (lambda v: isinstance(v, bool | Mapping),
                   "true, false or VecNormalize's keyword arguments, e.g. {clip_reward: 10000}"),
     "policy": (lambda v: isinstance(v, str) and bool(v), "a policy name, e.g. MlpPolicy"),
@@ -252,8 +256,8 @@ _RULES: dict[str, tuple[Callable[[Any], bool], str]] = {
 }
 #: Settings of ours (:func:`load_hyperparams`); the others are the algorithm's keyword arguments.
 OWN_SETTINGS = ("n_timesteps", "n_envs", "policy", "normalize", "policy_kwargs",
-                "failure_penalty", "failure_cost_to_go", "validation_episodes", "residual",
-                "residual_scale")
+                "failure_penalty", "failure_cost_to_go", "action_rate_penalty",
+                "reward_scale", "validation_episodes", "residual", "residual_scale")
 #: The algorithms' keyword arguments that :func:`~agents.sb3.training.train` sets itself: not
 #: settings.
 _SET_BY_TRAIN = ("self", "policy", "env", "seed", "device", "verbose", "tensorboard_log",

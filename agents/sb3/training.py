@@ -54,7 +54,7 @@ from .runs import (
     read_config,
     run_lock,
 )
-from .vec_env import FailurePenalty, make_vec_env
+from .vec_env import ActionRatePenalty, FailurePenalty, RewardScale, make_vec_env
 
 
 @dataclasses.dataclass
@@ -194,11 +194,16 @@ RESIDUAL_VALIDATION_EPISODES = 8
 
 @dataclasses.dataclass(frozen=True)
 class _Penalty:
-    """A run's failure penalty (reward units) and whether a failure also costs the rest of
-    its episode at its own rate (:class:`~agents.sb3.vec_env.FailurePenalty`)."""
+    """A run's reward shaping (training only): the failure penalty (reward units), whether a
+    failure also costs the rest of its episode at its own rate
+    (:class:`~agents.sb3.vec_env.FailurePenalty`), the weight of the action-rate penalty
+    (:class:`~agents.sb3.vec_env.ActionRatePenalty`) and a fixed reward scale
+    (:class:`~agents.sb3.vec_env.RewardScale`)."""
 
     penalty: float = 0.0
     cost_to_go: bool = False
+    action_rate: float = 0.0
+    reward_scale: float = 1.0
 
 
 def _algorithm_kwargs(config: Mapping[str, Any]) -> tuple[dict[str, Any], str, bool,
@@ -210,7 +215,9 @@ def _algorithm_kwargs(config: Mapping[str, Any]) -> tuple[dict[str, Any], str, b
     # normalize: a bool, or VecNormalize's keyword arguments (RL-Zoo style)
     normalize_kwargs = dict(normalize) if isinstance(normalize, Mapping) else {}
     penalty = _Penalty(float(params.pop("failure_penalty", 0.0)),
-                       bool(params.pop("failure_cost_to_go", False)))
+                       bool(params.pop("failure_cost_to_go", False)),
+                       float(params.pop("action_rate_penalty", 0.0)),
+                       float(params.pop("reward_scale", 1.0)))
     validation_episodes = params.pop("validation_episodes", 0)
     base, _ = residual_of(params)
     for key in ("residual", "residual_scale"):  # the environments' (:func:`_environments`)
@@ -228,7 +235,8 @@ def _environments(config: Mapping[str, Any], saved: Saved | None, params: Mappin
                   normalize: bool, normalize_kwargs: dict[str, Any], penalty: _Penalty
                   ) -> VecEnv:
     """The training environments: seeded on, after the steps already taken (a resumed run
-    sees new episodes), behind the failure penalty and the normalisation (restored)."""
+    sees new episodes), behind the failure and action-rate penalties, the reward scale and the
+    normalisation (restored)."""
     start = 0 if saved is None else int(saved.timesteps or 0)
     base, scale = residual_of(config["hyperparams"])
     venv = make_vec_env(config["env_id"], config["n_envs"], config["estimator"],
@@ -238,6 +246,10 @@ def _environments(config: Mapping[str, Any], saved: Saved | None, params: Mappin
         steps = evaluation.episode_steps(config["env_id"], config["max_episode_steps"]) \
             if penalty.cost_to_go else None
         venv = FailurePenalty(venv, penalty.penalty, steps)
+    if penalty.action_rate:
+        venv = ActionRatePenalty(venv, penalty.action_rate)
+    if penalty.reward_scale != 1.0:
+        venv = RewardScale(venv, penalty.reward_scale)
     if not normalize:
         return venv
     if saved is not None and saved.vecnormalize is not None:

@@ -1,7 +1,8 @@
 """The vector environments SB3 trains on: the native batched environment seen as an SB3
 ``VecEnv`` (:class:`SB3VecEnv`), or SB3's ``DummyVecEnv`` of single environments, optionally
-behind a state estimator (:func:`make_vec_env`), and the failure penalty of training
-(:class:`FailurePenalty`).
+behind a state estimator (:func:`make_vec_env`), and the reward shaping of training: the failure
+penalty (:class:`FailurePenalty`), the action-rate penalty (:class:`ActionRatePenalty`) and a
+fixed reward scale (:class:`RewardScale`).
 """
 
 from __future__ import annotations
@@ -186,6 +187,70 @@ class FailurePenalty(VecEnvWrapper):
         done = np.asarray(dones, dtype=bool)
         self._steps[done], self._cost[done] = 0, 0.0
         return obs, (rewards - charge * failed).astype(np.float32), dones, infos
+
+
+class ActionRatePenalty(VecEnvWrapper):
+    """Subtract ``weight * sum((a_t - a_{t-1})**2)`` (reward units; actions in the agent's
+    normalised units, -1..1) from each step's reward: a policy whose thrust chatters from step
+    to step pays for it. An episode's first step has no previous action and pays nothing.
+
+    The task's cost weighs the thrust, not its changes, so an agent that reacts to every wiggle
+    of the estimate (wave motion, sensor noise) loses little on the task but learns a jumpy,
+    imprecise policy; the penalty smooths it. Training only: evaluation scores the task's own
+    cost.
+    """
+
+    def __init__(self, venv: VecEnv, weight: float) -> None:
+        if not (math.isfinite(weight) and weight >= 0):
+            raise ValueError(f"action_rate_penalty={weight!r} is invalid: a finite number >= 0")
+        super().__init__(venv)
+        self.weight = float(weight)
+        shape = (venv.num_envs, *(venv.action_space.shape or ()))
+        self._previous = np.zeros(shape)  # each boat's last action
+        self._first = np.ones(venv.num_envs, dtype=bool)  # no last action yet
+        self._actions = np.zeros(shape)
+
+    def reset(self) -> VecEnvObs:
+        self._first[:] = True
+        return self.venv.reset()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions = np.asarray(actions, dtype=float).reshape(self._previous.shape)
+        self.venv.step_async(actions)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        change = (self._actions - self._previous).reshape(self.num_envs, -1)
+        charge = self.weight * np.sum(change * change, axis=1) * ~self._first
+        self._previous = self._actions.copy()
+        self._first = np.asarray(dones, dtype=bool).copy()  # a new episode starts next step
+        return obs, (rewards - charge).astype(np.float32), dones, infos
+
+
+class RewardScale(VecEnvWrapper):
+    """Multiply each step's reward by ``scale`` (training only): a fixed scale for a run that
+    does not normalise its rewards.
+
+    VecNormalize divides the rewards by the standard deviation of the discounted return over
+    all of training. Where early episodes cost orders of magnitude more than a good agent's
+    (a DP vessel driving off costs ~1e3 a step and the failure's cost-to-go ~1e6, keeping
+    station ~1), that running figure stays at the early returns', so a good agent's rewards
+    shrink to ~1e-5 and its value function cannot tell them apart; a fixed scale keeps them
+    as they are.
+    """
+
+    def __init__(self, venv: VecEnv, scale: float) -> None:
+        if not (math.isfinite(scale) and scale > 0):
+            raise ValueError(f"reward_scale={scale!r} is invalid: a finite number > 0")
+        super().__init__(venv)
+        self.scale = float(scale)
+
+    def reset(self) -> VecEnvObs:
+        return self.venv.reset()
+
+    def step_wait(self) -> VecEnvStepReturn:
+        obs, rewards, dones, infos = self.venv.step_wait()
+        return obs, (np.asarray(rewards) * self.scale).astype(np.float32), dones, infos
 
 
 # -- building environments ------------------------------------------------------------------
