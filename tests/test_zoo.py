@@ -212,3 +212,28 @@ def test_each_shipped_agent_loads_and_runs_a_full_episode(entry):
     rows = evaluate(entry.name, episodes=1, seed=1000)
     assert math.isfinite(rows[0]["cost"]) and not rows[0]["failed"]
     assert rows[0]["seconds"] == pytest.approx(steps * dt)  # the whole episode ran
+
+
+def test_every_shipped_agent_says_how_it_was_trained_and_what_it_scored():
+    """A card states the training (steps, time, speed, machine) and the held-out score the
+    comparison measured; a residual agent is shipped only if it beats its LQR there."""
+    for entry in zoo.entries():
+        card = entry.card
+        assert card["timesteps"] > 0 and card["wall_seconds"] > 0 and card["steps_per_second"] > 0
+        assert card["machine"]
+        held_out = card["scores"]["held_out"]
+        assert held_out["failed"] == 0 and len(held_out["seeds"]) >= 10
+        assert set(held_out["seeds"]).isdisjoint(range(1000, 1010))  # not the tuning seeds
+        if entry.kind.startswith("residual_"):
+            assert held_out["cost_ratio"] < 1.0, entry.name
+
+
+@pytest.mark.skipif("zoo:Hydrofoil-v0/residual_ppo" not in zoo.names(),
+                    reason="no hydrofoil residual agent shipped")
+def test_the_shipped_hydrofoil_correction_beats_its_lqr_on_fresh_seeds():
+    first = int(np.random.default_rng(60).integers(10**6, 2**31))  # seeded, never tuned on
+    seeds = range(first, first + 2)
+    agent = Agent.load("zoo:Hydrofoil-v0/residual_ppo")
+    mine = [r["cost"] for r in evaluation.evaluate(agent.config["env_id"], agent, "kf", seeds)]
+    lqr = [r["cost"] for r in evaluation.evaluate(agent.config["env_id"], "lqr", "kf", seeds)]
+    assert np.mean(mine) < 0.8 * np.mean(lqr)
