@@ -107,13 +107,16 @@ def _worst(runs: Sequence[dict[str, Any]]) -> float:
 
 
 def summary(rows: Sequence[dict[str, Any]], vehicles: Sequence[str]) -> list[dict[str, Any]]:
-    """Per vehicle: the best agent (lowest ratio without a failed episode), its verdict, the
+    """Per vehicle: the best agent (lowest ratio without a failed episode, a residual that
+    learnt nothing left out), its verdict, the
     pure-RL kind with the best worst seed (of those with two seeds or more, if any) and its
     ratios, the same for residual agents."""
     out = []
     for vehicle in vehicles:
         agents = _agents(rows, vehicle)
-        sound = [r for r in agents if not r["failed"]]
+        # a residual within UNCHANGED of the LQR learnt nothing: it is the LQR, not an agent
+        sound = [r for r in agents if not r["failed"] and not (
+            family(r["kind"]) == "residual" and abs(r["ratio"] - 1.0) < UNCHANGED)]
         best = min(sound, key=lambda r: r["ratio"]) if sound else None
         entry: dict[str, Any] = {"vehicle": vehicle, "best": None, "best_ratio": None,
                                  "best_verdict": "no agent without a failed episode" if agents
