@@ -198,8 +198,11 @@ def plot(rows: Sequence[dict[str, Any]], vehicles: Sequence[str], caption: str, 
     ax.set(yscale="log", ylabel="cost / LQR behind kf", xlim=(-0.6, len(vehicles) - 0.4))
     ax.set_xticks(range(len(vehicles)), list(vehicles))
     plain = matplotlib.ticker.FuncFormatter(lambda value, _: f"{value:g}")
+    # between decades only 2 and 5 are labelled: every minor label overlaps over decades
+    sparse = matplotlib.ticker.FuncFormatter(
+        lambda value, _: f"{value:g}" if f"{value:.0e}"[0] in "25" else "")
     ax.yaxis.set_major_formatter(plain)
-    ax.yaxis.set_minor_formatter(plain)
+    ax.yaxis.set_minor_formatter(sparse)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
     bench.figure(fig, path, caption, dpi=120)
