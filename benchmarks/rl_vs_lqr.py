@@ -235,17 +235,11 @@ class SeedSet:
 
 # -- scoring ---------------------------------------------------------------------------------
 
-def policy_factory(contender: Contender) -> Callable[[Any], Any]:
-    """``venv -> policy`` of an agent: the agent itself (``agent(venv)`` puts a residual
-    agent's LQR inside)."""
-    return sb3.load_agent(contender.source)  # a run folder or a zoo name
-
-
 def score(contender: Contender, seed_set: SeedSet, steps: int | None,
           progress: Callable[[int], None]) -> dict[str, Any]:
     """One row: the contender scored on the set's seeds (one batch) on its vehicle's sea."""
     policy: str | Callable[[Any], Any] = "lqr" if contender.source is None \
-        else policy_factory(contender)
+        else sb3.load_agent(contender.source)  # an agent is its own factory
     began = time.perf_counter()
     episodes = evaluation.evaluate(SHORT[contender.vehicle], policy, contender.estimator,
                                    seed_set.seeds, env_kwargs=seed_set.seas.get(contender.vehicle),
